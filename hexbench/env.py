@@ -1,0 +1,267 @@
+"""The hexbench Gymnasium environment: JetHexa on a terrain, one of three action modes.
+
+Observation (62 float32, paper section 3.3), in this order:
+  [0:18]  joint positions [rad]          [18:36] joint velocities [rad/s]
+  [36:54] joint torques [N m]            [54:57] base x, y, z [m] (world)
+  [57:60] base roll, pitch, yaw [rad]    [60:62] target x, y [m] (world)
+plus optional Gaussian noise xi with the standard deviations of `ObservationNoise`.
+
+Action modes (all Box(-1, 1) so every learner sees a normalised space):
+  joint         pure DRL: a in [-1, 1]^18 maps linearly onto each joint's [lower, upper] limits;
+  cpg_residual  a_t = a_c + eps a_r (eq. 6): a_r in [-1, 1]^18 [rad], a_c the CPG's joint angles,
+                eps 0.6 rough / 0.4 slopes / 0.3 stairs by default (paper 3.2);
+  cpg_params    HRL: a in [-1, 1]^4 maps linearly onto omega_swing in [pi/2, pi] rad/s,
+                A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (paper 4.3).
+
+Episode end: success (base 2.5 m ahead of its start along +x), |y - y_start| > 0.8 m, a fall
+(body tilted more than 60 deg from upright), optionally a stall (less than 5 cm forward
+progress in the last 20 s; the evaluation protocol turns this on), all `terminated`; or the
+4000-step limit, `truncated`. Control runs at 60 Hz (4 physics steps of 1/240 s).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import gymnasium as gym
+import numpy as np
+
+from hexbench.cpg import CPGParams, HopfCPG
+from hexbench.rewards import TABLE1_WEIGHTS, difficulty_factor, reward_terms, total_reward
+from hexbench.robot import NUM_JOINTS, JetHexaSpec
+from hexbench.sim import PhysicsConfig, Simulation
+from hexbench.terrain import TERRAIN_KINDS, make_terrain
+
+ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params")
+DEFAULT_RESIDUAL_SCALE: dict[str, float] = {"rough": 0.6, "slopes": 0.4, "stairs": 0.3, "flat": 0.6}
+# HRL parameter ranges (paper 4.3): omega_swing [rad/s], A1, A2, A3.
+CPG_PARAM_LOW = np.array([math.pi / 2, -1.0, -0.5, -1.0])
+CPG_PARAM_HIGH = np.array([math.pi, 1.0, 1.0, 0.5])
+OBS_DIM = 62
+END_REASONS: tuple[str, ...] = ("success", "lateral_deviation", "fall", "stalled", "step_limit")
+
+
+@dataclass(frozen=True)
+class ObservationNoise:
+    """Standard deviations of the Gaussian observation noise xi (0 disables a group)."""
+
+    joint_pos_rad: float = 0.01
+    joint_vel_rad_per_s: float = 0.05
+    joint_torque_nm: float = 0.05
+    base_pos_m: float = 0.01
+    base_rpy_rad: float = 0.01
+
+    def std_vector(self) -> np.ndarray:
+        return np.concatenate([
+            np.full(18, self.joint_pos_rad), np.full(18, self.joint_vel_rad_per_s),
+            np.full(18, self.joint_torque_nm), np.full(3, self.base_pos_m), np.full(3, self.base_rpy_rad),
+            np.zeros(2),
+        ])
+
+
+NO_NOISE = ObservationNoise(0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Curriculum:
+    """Training curriculum (paper 4.1): level up after `successes_per_level` arrivals."""
+
+    start_level: float
+    level_step: float
+    max_level: float
+    successes_per_level: int = 20
+
+
+CURRICULA: dict[str, Curriculum] = {
+    "rough": Curriculum(5.0, 1.0, 13.0),
+    "slopes": Curriculum(5.0, 3.0, 18.0),  # 5, 8, 11, 14, 17 (the paper caps at 18)
+    "stairs": Curriculum(5.0, 0.5, 8.0),
+}
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    terrain: str
+    level: float = 0.0  # paper units: cm (rough, stairs), deg (slopes); ignored with a curriculum
+    action_mode: str = "cpg_residual"
+    residual_scale: float | None = None  # eps; None -> DEFAULT_RESIDUAL_SCALE[terrain]
+    curriculum: Curriculum | None = None
+    noise: ObservationNoise = field(default_factory=ObservationNoise)
+    max_steps: int = 4000
+    goal_distance_m: float = 2.5
+    max_lateral_deviation_m: float = 0.8
+    fall_tilt_deg: float = 60.0
+    stall_window_s: float | None = None  # None: no stall rule
+    stall_min_progress_m: float = 0.05
+    init_xy_jitter_m: float = 0.02  # uniform +- start position perturbation
+    init_yaw_jitter_rad: float = 0.05  # uniform +- start heading perturbation
+    physics: PhysicsConfig = field(default_factory=PhysicsConfig)
+    robot: JetHexaSpec = field(default_factory=JetHexaSpec)
+    cpg: CPGParams = field(default_factory=CPGParams)
+
+    def __post_init__(self) -> None:
+        if self.terrain not in TERRAIN_KINDS:
+            raise ValueError(f"unknown terrain {self.terrain!r}; valid terrains: {', '.join(TERRAIN_KINDS)}")
+        if self.action_mode not in ACTION_MODES:
+            raise ValueError(f"unknown action mode {self.action_mode!r}; valid modes: {', '.join(ACTION_MODES)}")
+
+    @property
+    def eps(self) -> float:
+        return DEFAULT_RESIDUAL_SCALE[self.terrain] if self.residual_scale is None else self.residual_scale
+
+
+class HexapodEnv(gym.Env):
+    """JetHexa locomotion on one terrain family (see module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 60}
+
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **overrides):
+        if config is None:
+            config = EnvConfig(**overrides)
+        elif overrides:
+            from dataclasses import replace
+
+            config = replace(config, **overrides)
+        self.config = config
+        self.render_mode = render_mode
+        self.sim = Simulation(config.robot, config.physics)
+        self.cpg = HopfCPG(config.cpg, dt_s=config.physics.control_dt_s)
+        n_act = 4 if config.action_mode == "cpg_params" else NUM_JOINTS
+        self.action_space = gym.spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), dtype=np.float32)
+        self._noise_std = config.noise.std_vector()
+        self._noise_on = bool(np.any(self._noise_std > 0))
+        self._weights = TABLE1_WEIGHTS[config.terrain]
+        self._joint_mid = (self.sim.joint_upper_rad + self.sim.joint_lower_rad) / 2
+        self._joint_half = (self.sim.joint_upper_rad - self.sim.joint_lower_rad) / 2
+        self._stall_steps = (None if config.stall_window_s is None
+                             else max(1, round(config.stall_window_s / config.physics.control_dt_s)))
+        self.level = config.curriculum.start_level if config.curriculum else config.level
+        self.curriculum_successes = 0
+        self._noise_rng = np.random.default_rng(0)
+        self._steps = 0
+
+    # ----------------------------------------------------------------- reset
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        terrain_rng, init_rng, noise_rng = self.np_random.spawn(3)
+        cfg = self.config
+        x0 = init_rng.uniform(-cfg.init_xy_jitter_m, cfg.init_xy_jitter_m)
+        y0 = init_rng.uniform(-cfg.init_xy_jitter_m, cfg.init_xy_jitter_m)
+        yaw0 = init_rng.uniform(-cfg.init_yaw_jitter_rad, cfg.init_yaw_jitter_rad)
+        self.sim.load(make_terrain(cfg.terrain, self.level), terrain_rng, (x0, y0), yaw0)
+        self._noise_rng = noise_rng
+        self.cpg.set_params(cfg.cpg)
+        self.cpg.reset()
+        self._steps = 0
+        state = self.sim.state()
+        self.start_xy = state.base_pos_m[:2].copy()
+        self.target_xy = self.start_xy + np.array([cfg.goal_distance_m, 0.0])
+        self._x_history = [float(state.base_pos_m[0])] if self._stall_steps else []
+        self._delta = difficulty_factor(cfg.terrain, self.level)
+        self._state = state
+        info = {"level": self.level, "start_xy": self.start_xy.copy(), "target_xy": self.target_xy.copy()}
+        return self._observe(state), info
+
+    # ------------------------------------------------------------------ step
+    def joint_targets(self, action: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(a_t, a_c, a_r) for an action: the joint targets sent, the CPG part and the policy part [rad]."""
+        mode = self.config.action_mode
+        if mode == "joint":
+            a_t = self._joint_mid + self._joint_half * action
+            return a_t, np.zeros(NUM_JOINTS), a_t
+        if mode == "cpg_params":
+            params = CPG_PARAM_LOW + (action + 1.0) * 0.5 * (CPG_PARAM_HIGH - CPG_PARAM_LOW)
+            self.cpg.set_params(self.config.cpg.with_gait(*params))
+            a_c = self.cpg.step()
+            return a_c, a_c, np.zeros(NUM_JOINTS)
+        a_c = self.cpg.step()
+        return a_c + self.config.eps * action, a_c, action
+
+    def step(self, action):
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != self.action_space.shape:
+            raise ValueError(f"action has shape {action.shape}; expected {self.action_space.shape}")
+        if not np.all(np.isfinite(action)):
+            raise ValueError("action contains NaN or infinite values")
+        action = np.clip(action, -1.0, 1.0)
+        a_t, a_c, a_r = self.joint_targets(action)
+        sent = self.sim.send_targets(a_t)
+        self.sim.step_physics()
+        self._steps += 1
+        state = self.sim.state()
+        self._state = state
+        cfg = self.config
+        pos = state.base_pos_m
+        progress = float(pos[0] - self.start_xy[0])
+        lateral = float(pos[1] - self.start_xy[1])
+        fell = state.up_z < math.cos(math.radians(cfg.fall_tilt_deg))
+        reason = None
+        if fell:
+            reason = "fall"
+        elif progress >= cfg.goal_distance_m:
+            reason = "success"
+        elif abs(lateral) > cfg.max_lateral_deviation_m:
+            reason = "lateral_deviation"
+        elif self._stall_steps:
+            self._x_history.append(float(pos[0]))
+            if len(self._x_history) > self._stall_steps:
+                if pos[0] - self._x_history[-1 - self._stall_steps] < cfg.stall_min_progress_m:
+                    reason = "stalled"
+                self._x_history.pop(0)
+        truncated = reason is None and self._steps >= cfg.max_steps
+        if truncated:
+            reason = "step_limit"
+        terminated = reason is not None and not truncated
+
+        dx, dy = self.target_xy - pos[:2]
+        yaw = state.base_rpy_rad[2]
+        heading_error = (math.atan2(dy, dx) - yaw + math.pi) % (2 * math.pi) - math.pi
+        terrain = self.sim.terrain
+        terms = reward_terms(
+            distance_m=math.hypot(dx, dy), heading_error_rad=heading_error, fell=fell,
+            pitch_up_deg=-math.degrees(state.base_rpy_rad[1]), ground_slope_deg=terrain.slope_deg_at(pos[0]),
+            base_height_cm=100.0 * pos[2], step_limit_exceeded=truncated,
+        )
+        reward = total_reward(terms, self._weights, self._delta)
+        if reason == "success" and cfg.curriculum is not None:
+            self._count_curriculum_success()
+        info = {
+            "progress_m": progress, "lateral_m": lateral, "end_reason": reason, "level": self.level,
+            "reward_terms": terms, "a_c": a_c, "a_r": a_r, "a_t": sent, "sim_time_s": self.sim_time_s,
+        }
+        if reason is not None:
+            info["is_success"] = reason == "success"
+        return self._observe(state), reward, terminated, truncated, info
+
+    def _count_curriculum_success(self) -> None:
+        cur = self.config.curriculum
+        self.curriculum_successes += 1
+        if self.curriculum_successes >= cur.successes_per_level and self.level + cur.level_step <= cur.max_level + 1e-9:
+            self.level = round(self.level + cur.level_step, 6)
+            self.curriculum_successes = 0
+
+    @property
+    def sim_time_s(self) -> float:
+        return self._steps * self.config.physics.control_dt_s
+
+    # ------------------------------------------------------------ observation
+    def _observe(self, state) -> np.ndarray:
+        obs = np.concatenate([
+            state.joint_pos_rad, state.joint_vel_rad_per_s, state.joint_torque_nm,
+            state.base_pos_m, state.base_rpy_rad, self.target_xy,
+        ])
+        if self._noise_on:
+            obs = obs + self._noise_std * self._noise_rng.standard_normal(OBS_DIM)
+        return obs.astype(np.float32)
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        from hexbench.camera import follow_camera_image
+
+        return follow_camera_image(self.sim)
+
+    def close(self):
+        self.sim.close()

@@ -1,0 +1,165 @@
+"""One PyBullet physics client (DIRECT) holding the JetHexa and a terrain.
+
+Rates: physics at 240 Hz (PyBullet's default step, 1/240 s); the controller acts every 4
+physics steps, i.e. at 60 Hz. Servos are PyBullet position motors with the stall torque as
+force limit; the servo speed limit is enforced on the commanded target (it moves at most
+max_speed * dt per control step towards the requested angle).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tempfile
+from dataclasses import dataclass
+from functools import lru_cache
+
+import numpy as np
+import pybullet as p
+
+from hexbench.robot import FOOT_LINK_NAMES, NUM_JOINTS, JetHexaSpec, urdf_text
+from hexbench.terrain import BuiltTerrain, Terrain
+
+
+@dataclass(frozen=True)
+class PhysicsConfig:
+    physics_dt_s: float = 1.0 / 240.0
+    substeps_per_control: int = 4  # control at 60 Hz
+    solver_iterations: int = 20
+    gravity_m_per_s2: float = 9.81
+
+    @property
+    def control_dt_s(self) -> float:
+        return self.physics_dt_s * self.substeps_per_control
+
+
+@dataclass
+class RobotState:
+    joint_pos_rad: np.ndarray  # (18,)
+    joint_vel_rad_per_s: np.ndarray  # (18,)
+    joint_torque_nm: np.ndarray  # (18,)
+    base_pos_m: np.ndarray  # (3,) world xyz
+    base_quat_xyzw: np.ndarray  # (4,)
+    base_rpy_rad: np.ndarray  # (3,) roll, pitch, yaw
+    base_lin_vel_m_per_s: np.ndarray  # (3,)
+
+    @property
+    def up_z(self) -> float:
+        """z component of the body's up axis: cos of the body's tilt from vertical."""
+        x, y, _, _ = self.base_quat_xyzw
+        return float(1.0 - 2.0 * (x * x + y * y))
+
+
+@lru_cache(maxsize=4)
+def _urdf_file(spec: JetHexaSpec) -> str:
+    """Write the robot URDF once per process and spec (PyBullet loads URDF from files only)."""
+    fd, path = tempfile.mkstemp(prefix="jethexa_", suffix=".urdf")
+    with os.fdopen(fd, "w") as f:
+        f.write(urdf_text(spec))
+    return path
+
+
+class Simulation:
+    """Robot + terrain in one physics client. `load(terrain, rng, pose)` rebuilds the world."""
+
+    def __init__(self, robot: JetHexaSpec = JetHexaSpec(), physics: PhysicsConfig = PhysicsConfig()):
+        self.robot_spec = robot
+        self.physics = physics
+        self.client = p.connect(p.DIRECT)
+        self.robot_id = -1
+        self.terrain: BuiltTerrain | None = None
+        self.joint_indices = list(range(NUM_JOINTS))
+        self.foot_link_indices: list[int] = []
+        limits = np.array(robot.joint_limits_rad())
+        self.joint_lower_rad, self.joint_upper_rad = limits[:, 0], limits[:, 1]
+        self._command = np.zeros(NUM_JOINTS)
+        self._forces = [robot.servo_stall_torque_nm] * NUM_JOINTS
+        self._kp = [robot.servo_position_gain] * NUM_JOINTS
+        self._kd = [robot.servo_velocity_gain] * NUM_JOINTS
+        self._max_delta_rad = robot.servo_max_speed_rad_per_s * physics.control_dt_s
+
+    def load(self, terrain: Terrain, rng: np.random.Generator,
+             base_xy_m: tuple[float, float] = (0.0, 0.0), yaw_rad: float = 0.0) -> None:
+        """Reset the world: a fresh terrain instance from `rng` and the robot standing on it."""
+        c = self.client
+        p.resetSimulation(physicsClientId=c)
+        p.setGravity(0, 0, -self.physics.gravity_m_per_s2, physicsClientId=c)
+        p.setPhysicsEngineParameter(fixedTimeStep=self.physics.physics_dt_s,
+                                    numSolverIterations=self.physics.solver_iterations,
+                                    deterministicOverlappingPairs=1, physicsClientId=c)
+        self.terrain = terrain.build(c, rng)
+        x, y = base_xy_m
+        z = self.terrain.height_at(x, y) + self.robot_spec.standing_base_height_m + 0.01
+        self.robot_id = p.loadURDF(_urdf_file(self.robot_spec), [x, y, z],
+                                   p.getQuaternionFromEuler([0, 0, yaw_rad]), physicsClientId=c)
+        names = {p.getJointInfo(self.robot_id, j, physicsClientId=c)[12].decode(): j
+                 for j in range(p.getNumJoints(self.robot_id, physicsClientId=c))}
+        self.foot_link_indices = [names[n] for n in FOOT_LINK_NAMES]
+        for link in self.foot_link_indices:
+            p.changeDynamics(self.robot_id, link, lateralFriction=self.robot_spec.foot_friction, physicsClientId=c)
+        self._command = np.zeros(NUM_JOINTS)
+        self.send_targets(self._command)
+        for _ in range(24):  # settle onto the ground (0.1 s)
+            p.stepSimulation(physicsClientId=c)
+
+    def send_targets(self, targets_rad: np.ndarray) -> np.ndarray:
+        """Command joint targets (clipped to limits, rate-limited to servo speed); return what was sent."""
+        wanted = np.clip(targets_rad, self.joint_lower_rad, self.joint_upper_rad)
+        step = np.clip(wanted - self._command, -self._max_delta_rad, self._max_delta_rad)
+        self._command = self._command + step
+        p.setJointMotorControlArray(self.robot_id, self.joint_indices, p.POSITION_CONTROL,
+                                    targetPositions=self._command.tolist(), forces=self._forces,
+                                    positionGains=self._kp, velocityGains=self._kd, physicsClientId=self.client)
+        return self._command
+
+    def step_physics(self) -> None:
+        """Advance one control period (substeps_per_control physics steps)."""
+        for _ in range(self.physics.substeps_per_control):
+            p.stepSimulation(physicsClientId=self.client)
+
+    def state(self) -> RobotState:
+        c, r = self.client, self.robot_id
+        js = p.getJointStates(r, self.joint_indices, physicsClientId=c)
+        pos, quat = p.getBasePositionAndOrientation(r, physicsClientId=c)
+        lin, _ = p.getBaseVelocity(r, physicsClientId=c)
+        return RobotState(
+            joint_pos_rad=np.array([s[0] for s in js]),
+            joint_vel_rad_per_s=np.array([s[1] for s in js]),
+            joint_torque_nm=np.array([s[3] for s in js]),
+            base_pos_m=np.array(pos),
+            base_quat_xyzw=np.array(quat),
+            base_rpy_rad=np.array(p.getEulerFromQuaternion(quat)),
+            base_lin_vel_m_per_s=np.array(lin),
+        )
+
+    def foot_contacts(self) -> np.ndarray:
+        """Whether each foot (tibia link) touches anything: (6,) bool."""
+        c = self.client
+        return np.array([
+            len(p.getContactPoints(bodyA=self.robot_id, linkIndexA=link, physicsClientId=c)) > 0
+            for link in self.foot_link_indices
+        ])
+
+    def link_poses(self) -> list[tuple[tuple[float, ...], tuple[float, ...]]]:
+        """World (position, quaternion xyzw) of every link, base first."""
+        c, r = self.client, self.robot_id
+        base = p.getBasePositionAndOrientation(r, physicsClientId=c)
+        links = p.getLinkStates(r, list(range(p.getNumJoints(r, physicsClientId=c))),
+                                computeForwardKinematics=True, physicsClientId=c)
+        return [base] + [(s[4], s[5]) for s in links]
+
+    def close(self) -> None:
+        if self.client >= 0 and p.isConnected(self.client):
+            p.disconnect(self.client)
+        self.client = -1
+
+    def __del__(self) -> None:  # pragma: no cover - best effort at interpreter exit
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def tilt_deg(state: RobotState) -> float:
+    """Angle between the body's up axis and world up [deg]."""
+    return math.degrees(math.acos(max(-1.0, min(1.0, state.up_z))))
