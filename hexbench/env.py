@@ -39,6 +39,11 @@ DEFAULT_RESIDUAL_SCALE: dict[str, float] = {"rough": 0.6, "slopes": 0.4, "stairs
 CPG_PARAM_LOW = np.array([math.pi / 2, -1.0, -0.5, -1.0])
 CPG_PARAM_HIGH = np.array([math.pi, 1.0, 1.0, 0.5])
 OBS_DIM = 62
+# Observation bounds (generous physical limits; observations are clipped to them).
+OBS_HIGH = np.concatenate([
+    np.full(18, 2 * math.pi), np.full(18, 100.0), np.full(18, 20.0), np.full(3, 100.0), np.full(3, 4.0),
+    np.full(2, 100.0),
+]).astype(np.float32)
 END_REASONS: tuple[str, ...] = ("success", "lateral_deviation", "fall", "stalled", "step_limit")
 
 
@@ -129,7 +134,7 @@ class HexapodEnv(gym.Env):
         self.cpg = HopfCPG(config.cpg, dt_s=config.physics.control_dt_s)
         n_act = 4 if config.action_mode == "cpg_params" else NUM_JOINTS
         self.action_space = gym.spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
-        self.observation_space = gym.spaces.Box(-np.inf, np.inf, (OBS_DIM,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
         self._noise_std = config.noise.std_vector()
         self._noise_on = bool(np.any(self._noise_std > 0))
         self._weights = TABLE1_WEIGHTS[config.terrain]
@@ -254,7 +259,7 @@ class HexapodEnv(gym.Env):
         ])
         if self._noise_on:
             obs = obs + self._noise_std * self._noise_rng.standard_normal(OBS_DIM)
-        return obs.astype(np.float32)
+        return np.clip(obs, -OBS_HIGH, OBS_HIGH).astype(np.float32)
 
     def render(self):
         if self.render_mode != "rgb_array":
