@@ -1,0 +1,25 @@
+# Two commands do all set-up on a fresh clone:  `make run` (the main job)  and  `make test`.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+# torch 2.13.0: on the hexbench CI machines pip takes a CPU build from local disk. Elsewhere,
+# for a CPU-only build pass PyTorch's CPU wheel index, e.g. TORCH_PIP_ARGS="--index-url <cpu index>".
+TORCH_SPEC ?= torch==2.13.0
+TORCH_PIP_ARGS ?=
+
+.PHONY: setup run test test-all
+setup: $(VENV)/.installed
+
+$(VENV)/.installed: pyproject.toml
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PY) -m pip install -q --disable-pip-version-check $(TORCH_PIP_ARGS) "$(TORCH_SPEC)"
+	$(PY) -m pip install -q --disable-pip-version-check -e ".[test]"
+	touch $@
+
+run: setup
+	$(VENV)/bin/hexbench run baselines/cpg.py
+
+test: setup
+	$(PY) -m pytest -q
+
+test-all: setup
+	$(PY) -m pytest -q -m "slow or not slow"

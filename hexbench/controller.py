@@ -1,0 +1,100 @@
+"""The submission interface: a controller file and the `Controller` protocol.
+
+A controller file is a Python file that defines
+
+    def make_controller(task: hexbench.tasks.TaskSpec) -> Controller
+
+where a Controller is any object with
+
+    action_mode: str                 # "joint", "cpg_residual" or "cpg_params" (see env.py)
+    def reset(self, seed: int) -> None
+    def act(self, obs: np.ndarray) -> np.ndarray   # (62,) float32 in, action in [-1, 1] out
+
+The evaluator only passes observations in and takes actions out. Every action is checked
+(`check_action`) before it reaches the simulator.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import sys
+import uuid
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from hexbench.env import ACTION_MODES
+
+
+@runtime_checkable
+class Controller(Protocol):
+    action_mode: str
+
+    def reset(self, seed: int) -> None: ...
+
+    def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+class ControllerError(Exception):
+    """A submitted controller misbehaved; the message is one line naming file and problem."""
+
+
+def file_sha256(path: str | Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def load_controller_module(path: str | Path):
+    """Import a controller file as a fresh module; ControllerError on any failure."""
+    path = Path(path)
+    if not path.is_file():
+        raise ControllerError(f"{path}: no such controller file")
+    name = f"hexbench_submission_{path.stem}_{uuid.uuid4().hex[:8]}"
+    spec = importlib.util.spec_from_file_location(name, path)
+    if spec is None or spec.loader is None:
+        raise ControllerError(f"{path}: cannot be imported as a Python file")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    try:
+        spec.loader.exec_module(module)
+    except SyntaxError as e:
+        raise ControllerError(f"{path}: syntax error at line {e.lineno}: {e.msg}") from None
+    except BaseException as e:  # noqa: BLE001 - any failure of foreign code is reported, not raised
+        raise ControllerError(f"{path}: import failed: {type(e).__name__}: {e}") from None
+    if not callable(getattr(module, "make_controller", None)):
+        raise ControllerError(f"{path}: defines no make_controller(task) function")
+    return module
+
+
+def make_controller(path: str | Path, task) -> Controller:
+    """Load the file and build its controller for `task`, checking the protocol."""
+    module = load_controller_module(path)
+    try:
+        ctrl = module.make_controller(task)
+    except BaseException as e:  # noqa: BLE001
+        raise ControllerError(f"{path}: make_controller raised {type(e).__name__}: {e}") from None
+    for attr in ("reset", "act"):
+        if not callable(getattr(ctrl, attr, None)):
+            raise ControllerError(f"{path}: controller has no {attr}() method")
+    mode = getattr(ctrl, "action_mode", None)
+    if mode not in ACTION_MODES:
+        raise ControllerError(f"{path}: controller action_mode is {mode!r}; valid modes: {', '.join(ACTION_MODES)}")
+    return ctrl
+
+
+def check_action(action, expected_dim: int, where: str) -> np.ndarray:
+    """Validate one action (type, shape, dtype, finite, within [-1, 1]); ControllerError if bad."""
+    if action is None:
+        raise ControllerError(f"{where}: act() returned None; expected a float array of shape ({expected_dim},)")
+    if not isinstance(action, np.ndarray):
+        raise ControllerError(f"{where}: act() returned {type(action).__name__}; expected a numpy float array of shape ({expected_dim},)")
+    if action.dtype.kind != "f":
+        raise ControllerError(f"{where}: action dtype is {action.dtype}; expected float32 or float64")
+    if action.shape != (expected_dim,):
+        raise ControllerError(f"{where}: action shape is {action.shape}; expected ({expected_dim},)")
+    if not np.all(np.isfinite(action)):
+        raise ControllerError(f"{where}: action contains NaN or infinite values")
+    if np.any(np.abs(action) > 1.0 + 1e-6):
+        raise ControllerError(f"{where}: action outside [-1, 1] (max |a| = {float(np.max(np.abs(action))):.3g})")
+    return action.astype(np.float64)
