@@ -17,6 +17,16 @@ from hexbench.sim import Simulation
 
 
 @dataclass(frozen=True)
+class Lighting:
+    """A directional light for TinyRenderer (without one, its default light shades slopes and flat ground alike)."""
+
+    direction: tuple[float, float, float] = (-1.0, 0.4, 0.5)  # world frame, towards the light
+    ambient: float = 0.25
+    diffuse: float = 0.75
+    specular: float = 0.0
+
+
+@dataclass(frozen=True)
 class CameraSpec:
     width_px: int = 128
     height_px: int = 96
@@ -26,14 +36,18 @@ class CameraSpec:
     pitch_down_deg: float = 30.0
     near_m: float = 0.02
     far_m: float = 5.0
+    lighting: Lighting | None = None  # None: TinyRenderer's default light
 
 
 def _render(client: int, eye, target, up, spec: CameraSpec) -> np.ndarray:
     view = p.computeViewMatrix(eye, target, up, physicsClientId=client)
     proj = p.computeProjectionMatrixFOV(spec.fov_deg, spec.width_px / spec.height_px, spec.near_m, spec.far_m,
                                         physicsClientId=client)
+    light = {} if spec.lighting is None else dict(
+        lightDirection=list(spec.lighting.direction), lightAmbientCoeff=spec.lighting.ambient,
+        lightDiffuseCoeff=spec.lighting.diffuse, lightSpecularCoeff=spec.lighting.specular)
     _, _, rgba, _, _ = p.getCameraImage(spec.width_px, spec.height_px, view, proj,
-                                        renderer=p.ER_TINY_RENDERER, physicsClientId=client)
+                                        renderer=p.ER_TINY_RENDERER, physicsClientId=client, **light)
     return np.asarray(rgba, dtype=np.uint8).reshape(spec.height_px, spec.width_px, 4)[:, :, :3].copy()
 
 
