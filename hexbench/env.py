@@ -13,9 +13,8 @@ Action modes (all Box(-1, 1) so every learner sees a normalised space):
   cpg_params    HRL: a in [-1, 1]^4 maps linearly onto omega_swing in [pi/2, pi] rad/s,
                 A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (paper 4.3).
 
-Episode end: success (base 2.5 m ahead of its start along +x), |y - y_start| > 0.8 m, a fall
-(body tilted more than 60 deg from upright), optionally a stall (less than 5 cm forward
-progress in the last 20 s; the evaluation protocol turns this on), all `terminated`; or the
+Episode end: the rules of hexbench.protocol (fall, |y| > 0.8 m, success at 2.5 m ahead, an
+optional stall rule that the evaluation protocol turns on, all `terminated`; or the
 4000-step limit, `truncated`. Control runs at 60 Hz (4 physics steps of 1/240 s).
 """
 
@@ -28,6 +27,7 @@ import gymnasium as gym
 import numpy as np
 
 from hexbench.cpg import CPGParams, HopfCPG
+from hexbench.protocol import EpisodeJudge, EpisodeRules
 from hexbench.rewards import TABLE1_WEIGHTS, difficulty_factor, reward_terms, total_reward
 from hexbench.robot import NUM_JOINTS, JetHexaSpec
 from hexbench.sim import PhysicsConfig, Simulation
@@ -140,8 +140,12 @@ class HexapodEnv(gym.Env):
         self._weights = TABLE1_WEIGHTS[config.terrain]
         self._joint_mid = (self.sim.joint_upper_rad + self.sim.joint_lower_rad) / 2
         self._joint_half = (self.sim.joint_upper_rad - self.sim.joint_lower_rad) / 2
-        self._stall_steps = (None if config.stall_window_s is None
-                             else max(1, round(config.stall_window_s / config.physics.control_dt_s)))
+        stall_steps = (None if config.stall_window_s is None
+                       else max(1, round(config.stall_window_s / config.physics.control_dt_s)))
+        self._judge = EpisodeJudge(EpisodeRules(
+            goal_distance_m=config.goal_distance_m, max_lateral_deviation_m=config.max_lateral_deviation_m,
+            fall_tilt_deg=config.fall_tilt_deg, max_steps=config.max_steps, stall_window_steps=stall_steps,
+            stall_min_progress_m=config.stall_min_progress_m))
         self.level = config.curriculum.start_level if config.curriculum else config.level
         self.curriculum_successes = 0
         self._noise_rng = np.random.default_rng(0)
@@ -163,7 +167,7 @@ class HexapodEnv(gym.Env):
         state = self.sim.state()
         self.start_xy = state.base_pos_m[:2].copy()
         self.target_xy = self.start_xy + np.array([cfg.goal_distance_m, 0.0])
-        self._x_history = [float(state.base_pos_m[0])] if self._stall_steps else []
+        self._judge.reset()
         self._delta = difficulty_factor(cfg.terrain, self.level)
         self._state = state
         info = {"level": self.level, "start_xy": self.start_xy.copy(), "target_xy": self.target_xy.copy()}
@@ -201,23 +205,9 @@ class HexapodEnv(gym.Env):
         pos = state.base_pos_m
         progress = float(pos[0] - self.start_xy[0])
         lateral = float(pos[1] - self.start_xy[1])
-        fell = state.up_z < math.cos(math.radians(cfg.fall_tilt_deg))
-        reason = None
-        if fell:
-            reason = "fall"
-        elif progress >= cfg.goal_distance_m:
-            reason = "success"
-        elif abs(lateral) > cfg.max_lateral_deviation_m:
-            reason = "lateral_deviation"
-        elif self._stall_steps:
-            self._x_history.append(float(pos[0]))
-            if len(self._x_history) > self._stall_steps:
-                if pos[0] - self._x_history[-1 - self._stall_steps] < cfg.stall_min_progress_m:
-                    reason = "stalled"
-                self._x_history.pop(0)
-        truncated = reason is None and self._steps >= cfg.max_steps
-        if truncated:
-            reason = "step_limit"
+        reason = self._judge.end_reason(step=self._steps, progress_m=progress, lateral_m=lateral, up_z=state.up_z)
+        fell = reason == "fall"
+        truncated = reason == "step_limit"
         terminated = reason is not None and not truncated
 
         dx, dy = self.target_xy - pos[:2]
@@ -246,6 +236,11 @@ class HexapodEnv(gym.Env):
         if self.curriculum_successes >= cur.successes_per_level and self.level + cur.level_step <= cur.max_level + 1e-9:
             self.level = round(self.level + cur.level_step, 6)
             self.curriculum_successes = 0
+
+    @property
+    def robot_state(self):
+        """The noise-free robot state after the last reset/step (for metrics and recording)."""
+        return self._state
 
     @property
     def sim_time_s(self) -> float:

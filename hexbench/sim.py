@@ -15,7 +15,26 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import pybullet as p
+
+
+def _import_pybullet_quietly():
+    """Import pybullet without its 'pybullet build time' banner on stdout (it pollutes CLI output)."""
+    import sys
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(devnull, 1)
+        import pybullet
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
+        os.close(devnull)
+    return pybullet
+
+
+p = _import_pybullet_quietly()
 
 from hexbench.robot import FOOT_LINK_NAMES, NUM_JOINTS, JetHexaSpec, urdf_text
 from hexbench.terrain import BuiltTerrain, Terrain

@@ -6,6 +6,8 @@ import typer
 
 
 def register(app: typer.Typer) -> None:
+    _register_run(app)
+
     @app.command("list")
     def list_tasks(protocol: str = typer.Option("v1", help="protocol version")) -> None:
         """List terrains, levels and Gymnasium task ids."""
@@ -27,3 +29,125 @@ def register(app: typer.Typer) -> None:
         console.print(table)
         ids = registered_ids()
         console.print(f"{len(ids)} Gymnasium ids registered, e.g. {ids[0]} ... {ids[-1]}")
+
+
+def _parse_levels(text: str | None) -> list[float] | None:
+    if not text:
+        return None
+    try:
+        return [float(v) for v in text.replace(" ", "").split(",") if v]
+    except ValueError:
+        raise typer.BadParameter(f"--levels must be comma-separated numbers in the paper's units, got {text!r}")
+
+
+def print_success_table(record: dict, console) -> None:
+    """Per-terrain success rates laid out like paper Table 4, with 95% Wilson intervals."""
+    from rich.table import Table
+
+    from hexbench.tasks import format_level
+
+    for terrain in record["terrains"]:
+        name = terrain["terrain"]
+        rows = [lv for lv in record["levels"] if lv["terrain"] == name]
+        table = Table(title=f"{record['label']} on {name} (protocol {record['protocol']})", show_lines=False)
+        table.add_column(f"level ({terrain['unit']})", justify="right")
+        for lv in rows:
+            table.add_column(format_level(lv["level"]) + ("*" if lv["headroom"] else ""), justify="right")
+        table.add_row("success", *[f"{100 * lv['success_rate']:.0f}%" for lv in rows])
+        table.add_row("95% CI", *[f"{100 * lv['ci95_low']:.0f}-{100 * lv['ci95_high']:.0f}" for lv in rows])
+        table.add_row("speed m/s", *[f"{lv['mean_forward_speed_m_per_s']:.3f}" if lv["mean_forward_speed_m_per_s"]
+                                     is not None else "-" for lv in rows])
+        console.print(table)
+        hardest = terrain["hardest_level_passed"]
+        console.print(f"  hardest level passed (>= 80%): {format_level(hardest) if hardest is not None else 'none'}"
+                      f" {terrain['unit']}; AUC (paper levels) {terrain['auc']:.3f}"
+                      + (f"; headroom AUC {terrain['headroom_auc']:.3f}" if terrain.get("headroom_auc") is not None else "")
+                      + "   (* = headroom level beyond paper Table 4)")
+
+
+def _register_run(app: typer.Typer) -> None:
+    @app.command("run")
+    def run(
+        files: list[str] = typer.Argument(..., help="controller file(s) defining make_controller(task)"),
+        terrain: list[str] = typer.Option(None, "--terrain", help="rough, slopes or stairs (repeatable; default all)"),
+        levels: str = typer.Option(None, "--levels", help="comma-separated levels in the paper's units (cm, deg)"),
+        episodes: int = typer.Option(None, "--episodes", min=1, help="episodes per level (default: protocol's 20)"),
+        workers: int = typer.Option(0, "--workers", min=0, help="worker processes (0: all cores)"),
+        out: str = typer.Option(None, "--out", help="output directory (default runs/<name>-<protocol>)"),
+        protocol: str = typer.Option("v1", "--protocol", help="protocol version"),
+        record: bool = typer.Option(True, "--record/--no-record", help="write MCAP + Rerun logs per episode"),
+        label: str = typer.Option(None, "--label", help="name in records (default: file name without .py)"),
+    ) -> None:
+        """Evaluate controller files on the protocol; print a success table; write result.json and episodes.parquet."""
+        import os
+        from pathlib import Path
+
+        from rich.console import Console
+
+        from hexbench.controller import ControllerError
+        from hexbench.evaluate import evaluate
+        from hexbench.tasks import load_suite
+
+        console = Console()
+        err = Console(stderr=True)
+        try:
+            tasks = load_suite(protocol).select(terrain or None, _parse_levels(levels))
+        except ValueError as e:
+            err.print(f"[red]error:[/] {e}", highlight=False)
+            raise typer.Exit(2)
+        if record:
+            try:
+                import hexbench.recording  # noqa: F401
+            except ImportError:
+                err.print("note: episode recording is not available in this install; running with --no-record")
+                record = False
+        n_workers = workers or os.cpu_count() or 1
+        failed = 0
+        for f in files:
+            name = label if (label and len(files) == 1) else Path(f).stem
+            out_dir = Path(out) / (name if len(files) > 1 else "") if out else Path("runs") / f"{name}-{protocol}"
+            try:
+                result = evaluate(f, tasks, out_dir, episodes=episodes, workers=n_workers, record=record, label=name)
+            except ControllerError as e:
+                result = None
+                err.print(f"[red]error:[/] {e}", highlight=False)
+            else:
+                if result.error:
+                    err.print(f"[red]error:[/] {result.error}", highlight=False)
+            if result is None or result.error:
+                failed += 1
+                continue
+            print_success_table(result.record, console)
+            console.print(f"wrote {out_dir / 'result.json'} and {out_dir / 'episodes.parquet'} "
+                          f"({result.record['provenance']['wall_time_s']:.1f} s, {n_workers} workers)")
+        if failed:
+            raise typer.Exit(1)
+
+    @app.command("check")
+    def check(
+        files: list[str] = typer.Argument(..., help="controller file(s) to check"),
+        steps: int = typer.Option(120, "--steps", min=1, help="control steps per terrain"),
+        protocol: str = typer.Option("v1", "--protocol"),
+    ) -> None:
+        """One short episode per terrain (easiest level) to catch a broken controller in seconds."""
+        from rich.console import Console
+
+        from hexbench.controller import ControllerError
+        from hexbench.evaluate import EpisodeJob, run_episode
+        from hexbench.tasks import load_suite
+
+        console, err = Console(), Console(stderr=True)
+        suite = load_suite(protocol)
+        failed = 0
+        for f in files:
+            try:
+                for terrain_name in suite.terrains:
+                    task = suite.task(terrain_name, suite.levels(terrain_name)[0])
+                    row = run_episode(EpisodeJob(f, task, 0, task.seeds(1)[0], max_steps=steps))
+                    console.print(f"{f}: {task.name}: ok ({row['steps']} steps, {row['end_reason'] or 'running'},"
+                                  f" {row['progress_m']:.2f} m)", highlight=False)
+            except ControllerError as e:
+                err.print(f"[red]error:[/] {e}", highlight=False)
+                failed += 1
+        if failed:
+            raise typer.Exit(1)
