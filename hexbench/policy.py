@@ -1,0 +1,231 @@
+"""Trained baseline policies: baseline configs, observation scaling, verified checkpoints, controllers.
+
+A baseline file (baselines/*.py) defines a frozen config dataclass at its top and `CONFIG = Config()`.
+Every config has these fields, read here and by hexbench.train:
+
+    algo           "ppo", "sac" or "td3" (the Stable-Baselines3 class)
+    action_mode    "joint", "cpg_residual" or "cpg_params" (see hexbench.env)
+    net_arch       hidden layer sizes, e.g. (256, 256, 256, 256) (actor and critic alike)
+    activation     "relu" or "tanh"
+    residual_scale eps of eq. 6 (None: the terrain default of paper 3.2)
+    log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
+
+and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
+
+Checkpoints. Nothing is unpickled from a file whose sha256 was not checked first:
+  * shipped weights (baselines/checkpoints/<method>-<terrain>.zip) hold only the policy's
+    state_dict; `baselines/checkpoints/manifest.json` records each file's sha256. Loading reads
+    the manifest, hashes the file, and only then opens the zip with SB3's `load_from_zip_file(...,
+    load_data=False)`, which reads tensors with `torch.load(weights_only=True)` and skips the
+    cloudpickled "data" entry altogether. The network is rebuilt from the baseline's config.
+  * training checkpoints (full SB3 models, for resuming) are verified against the run's own
+    run.json before `ALGO.load` (see hexbench.train).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, fields, is_dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hexbench.env import ACTION_MODES, OBS_DIM
+
+ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
+ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
+# Config fields that are not SB3 constructor arguments.
+NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
+                                           "log_std_init"})
+MANIFEST_NAME = "manifest.json"
+
+# Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
+# [rad/s] are divided by 5 to bring them to O(1) like the other groups (positions [rad], torques
+# [N m], base pose [m, rad], target [m]).
+OBS_SCALE = np.concatenate([
+    np.ones(18), np.full(18, 0.2), np.ones(18), np.ones(3), np.ones(3), np.ones(2),
+]).astype(np.float32)
+assert OBS_SCALE.shape == (OBS_DIM,)
+
+
+class CheckpointError(Exception):
+    """A checkpoint is missing, corrupt, tampered with or unusable; the message is one line."""
+
+
+class ConfigError(ValueError):
+    """A baseline file's CONFIG is missing or invalid; the message is one line."""
+
+
+def scale_observation(obs: np.ndarray) -> np.ndarray:
+    return (np.asarray(obs, dtype=np.float32) * OBS_SCALE).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- configs
+def validate_config(config, where: str = "CONFIG") -> None:
+    if config is None or not is_dataclass(config):
+        raise ConfigError(f"{where}: expected a module-level CONFIG dataclass instance")
+    names = {f.name for f in fields(config)}
+    missing = sorted({"algo", "action_mode", "net_arch", "activation"} - names)
+    if missing:
+        raise ConfigError(f"{where}: config lacks field(s) {', '.join(missing)}")
+    if config.algo not in ALGOS:
+        raise ConfigError(f"{where}: algo {config.algo!r} unknown; valid: {', '.join(ALGOS)}")
+    if config.action_mode not in ACTION_MODES:
+        raise ConfigError(f"{where}: action_mode {config.action_mode!r} unknown; valid: {', '.join(ACTION_MODES)}")
+    if config.activation not in ACTIVATIONS:
+        raise ConfigError(f"{where}: activation {config.activation!r} unknown; valid: {', '.join(ACTIVATIONS)}")
+
+
+def algo_class(algo: str):
+    import stable_baselines3 as sb3
+
+    return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
+
+
+def policy_kwargs(config) -> dict:
+    import torch.nn as nn
+
+    activation = {"relu": nn.ReLU, "tanh": nn.Tanh}[config.activation]
+    out = {"net_arch": list(config.net_arch), "activation_fn": activation}
+    if getattr(config, "log_std_init", None) is not None:
+        out["log_std_init"] = float(config.log_std_init)
+    return out
+
+
+def sb3_kwargs(config) -> dict:
+    """The config's SB3 constructor arguments (all fields except NON_SB3_FIELDS)."""
+    out = {k: v for k, v in asdict(config).items() if k not in NON_SB3_FIELDS}
+    for k, v in out.items():
+        if isinstance(v, list):
+            out[k] = tuple(v)
+    return out
+
+
+def config_dict(config) -> dict:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()}
+
+
+def action_dim(action_mode: str) -> int:
+    return 4 if action_mode == "cpg_params" else 18
+
+
+def build_policy(config):
+    """An untrained SB3 policy network with the config's architecture (for loading weights)."""
+    import gymnasium as gym
+
+    from hexbench.env import OBS_HIGH
+
+    obs_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
+    act_space = gym.spaces.Box(-1.0, 1.0, (action_dim(config.action_mode),), dtype=np.float32)
+    cls = algo_class(config.algo)
+    policy_cls = cls.policy_aliases["MlpPolicy"]
+    return policy_cls(obs_space, act_space, lambda _progress: 0.0, **policy_kwargs(config))
+
+
+# ----------------------------------------------------------------------------- checkpoints
+def sha256_file(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def read_manifest(checkpoints_dir: Path) -> dict:
+    path = Path(checkpoints_dir) / MANIFEST_NAME
+    if not path.is_file():
+        raise CheckpointError(f"{path}: no checkpoint manifest")
+    try:
+        data = json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise CheckpointError(f"{path}: not valid JSON ({e.msg} at line {e.lineno})") from None
+    if not isinstance(data.get("checkpoints"), dict):
+        raise CheckpointError(f"{path}: has no 'checkpoints' table")
+    return data
+
+
+def verify_checkpoint(path: Path, expected_sha256: str) -> None:
+    """CheckpointError unless `path` exists and hashes to `expected_sha256`."""
+    path = Path(path)
+    if not path.is_file():
+        raise CheckpointError(f"{path}: checkpoint file missing")
+    actual = sha256_file(path)
+    if actual != expected_sha256:
+        raise CheckpointError(f"{path}: sha256 {actual[:12]}... does not match the manifest's "
+                              f"{expected_sha256[:12]}... (corrupt or tampered); refusing to load it")
+
+
+def load_policy_weights(path: Path, expected_sha256: str) -> dict:
+    """Verify, then read the policy state_dict (tensors only; the pickled 'data' entry is skipped)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    verify_checkpoint(path, expected_sha256)
+    try:
+        _data, params, _vars = load_from_zip_file(path, load_data=False, device="cpu")
+    except Exception as e:  # noqa: BLE001 - any failure becomes one line
+        raise CheckpointError(f"{path}: cannot be read as an SB3 checkpoint ({type(e).__name__}: {e})") from None
+    if "policy" not in params:
+        raise CheckpointError(f"{path}: holds no policy weights")
+    return params["policy"]
+
+
+def save_policy_weights(policy_state: dict, path: Path) -> str:
+    """Write a policy-only SB3 zip (no pickled data) atomically; returns its sha256."""
+    from stable_baselines3.common.save_util import save_to_zip_file
+
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.zip")
+    save_to_zip_file(tmp, data=None, params={"policy": policy_state})
+    tmp.replace(path)
+    return sha256_file(path)
+
+
+def load_policy(config, path: Path, expected_sha256: str):
+    policy = build_policy(config)
+    state = load_policy_weights(path, expected_sha256)
+    try:
+        policy.load_state_dict(state)
+    except RuntimeError as e:
+        first = str(e).splitlines()[0]
+        raise CheckpointError(f"{path}: weights do not fit the config's network ({first})") from None
+    policy.set_training_mode(False)
+    return policy
+
+
+def shipped_checkpoint(checkpoints_dir: Path, method: str, terrain: str) -> tuple[Path, dict]:
+    """(path, manifest entry) of the shipped weights for method x terrain; CheckpointError if none."""
+    manifest = read_manifest(checkpoints_dir)
+    key = f"{method}-{terrain}"
+    entry = manifest["checkpoints"].get(key)
+    if entry is None:
+        have = ", ".join(sorted(manifest["checkpoints"])) or "none"
+        raise CheckpointError(f"{Path(checkpoints_dir) / MANIFEST_NAME}: no checkpoint {key!r}; shipped: {have}")
+    return Path(checkpoints_dir) / entry["file"], entry
+
+
+class PolicyController:
+    """A trained SB3 policy behind the hexbench Controller protocol (deterministic actions)."""
+
+    def __init__(self, action_mode: str, policy, checkpoint_sha256: str = ""):
+        self.action_mode = action_mode
+        self.policy = policy
+        self.checkpoint_sha256 = checkpoint_sha256
+
+    def reset(self, seed: int) -> None:  # deterministic policy: nothing to reseed
+        pass
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        action, _ = self.policy.predict(scale_observation(obs), deterministic=True)
+        return np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+
+
+def make_policy_controller(config, checkpoints_dir: Path, method: str, terrain: str) -> PolicyController:
+    """What a baseline file's make_controller(task) returns: its shipped weights for the terrain."""
+    import torch
+
+    torch.set_num_threads(1)
+    validate_config(config, method)
+    path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
+    policy = load_policy(config, path, entry["sha256"])
+    return PolicyController(config.action_mode, policy, entry["sha256"])

@@ -1,0 +1,415 @@
+"""Training a baseline file on a terrain's curriculum with Stable-Baselines3 (`hexbench train`).
+
+    hexbench train baselines/ppo_cpg.py --terrain rough --steps 1000000 --seed 0 --workers 2
+
+The baseline file's CONFIG (see hexbench.policy) picks the algorithm, action mode and
+hyper-parameters. Environments are the paper's training curriculum (section 4.1: level up after
+20 arrivals, reward times (1 + delta), observation noise), one per worker: SubprocVecEnv for W > 1,
+DummyVecEnv for W = 1. Everything of a run lives in its directory (default
+training/<method>-<terrain>-seed<S>/):
+
+    run.json             what was run (command, config, seed, budget, commit) + every checkpoint
+                         with its sha256, env steps, wall time and metrics; the curriculum state
+    progress.csv         one row per env every `csv_every_s`: env_steps, wall_time_s, env_index,
+                         episodes, mean_episode_reward, success_rate (last 20 episodes of that env),
+                         curriculum_level, curriculum_successes
+    checkpoints/step_<N>.zip   full SB3 models (for resuming), every `checkpoint_every_s`
+    train.log            (when started in the background with output redirected)
+
+Running the same command again resumes from the last checkpoint (sha256 checked against run.json
+first), with the curriculum level of every env restored; --steps is the total budget, not the
+remainder. Off-policy methods (SAC, TD3) resume with an empty replay buffer: buffers are large and
+pickled, so they are not saved. SIGINT / SIGTERM save a checkpoint before exiting.
+"""
+
+from __future__ import annotations
+
+import ast
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import deque
+from dataclasses import dataclass, field, fields, replace
+from datetime import datetime, timezone
+from functools import partial
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+from hexbench.env import OBS_HIGH, HexapodEnv
+from hexbench.policy import (
+    OBS_SCALE, CheckpointError, ConfigError, algo_class, config_dict, policy_kwargs, sb3_kwargs, sha256_file,
+    validate_config,
+)
+
+TRAIN_TERRAINS: tuple[str, ...] = ("rough", "slopes", "stairs")
+METRICS_WINDOW_EPISODES = 20
+CSV_COLUMNS = ("env_steps", "wall_time_s", "env_index", "episodes", "mean_episode_reward", "success_rate",
+               "curriculum_level", "curriculum_successes")
+
+
+class TrainError(Exception):
+    """Bad training input or state; the message is one line."""
+
+
+# --------------------------------------------------------------------------- settings
+@dataclass(frozen=True)
+class TrainSettings:
+    baseline_path: Path
+    terrain: str
+    total_steps: int  # env steps, summed over workers
+    seed: int = 0
+    workers: int = 1
+    out_dir: Path | None = None  # None -> training/<method>-<terrain>-seed<seed>
+    checkpoint_every_s: float = 300.0
+    csv_every_s: float = 60.0
+    overrides: tuple[tuple[str, object], ...] = ()  # config field overrides (name, value)
+    command: str = ""
+    show_progress: bool = True
+
+    @property
+    def method(self) -> str:
+        return Path(self.baseline_path).stem
+
+    @property
+    def run_dir(self) -> Path:
+        return Path(self.out_dir) if self.out_dir else Path("training") / f"{self.method}-{self.terrain}-seed{self.seed}"
+
+
+def parse_override(text: str) -> tuple[str, object]:
+    """'learning_rate=3e-4' -> ('learning_rate', 0.0003); values are Python literals or bare strings."""
+    if "=" not in text:
+        raise TrainError(f"override {text!r} is not NAME=VALUE")
+    name, raw = text.split("=", 1)
+    try:
+        value = ast.literal_eval(raw)
+    except (ValueError, SyntaxError):
+        value = raw
+    return name.strip(), value
+
+
+def load_baseline_config(path: Path, overrides: tuple[tuple[str, object], ...] = ()):
+    """The CONFIG of a baseline file, with overrides applied and validated."""
+    from hexbench.controller import ControllerError, load_controller_module
+
+    try:
+        module = load_controller_module(path)
+    except ControllerError as e:
+        raise TrainError(str(e)) from None
+    config = getattr(module, "CONFIG", None)
+    try:
+        validate_config(config, str(path))
+    except ConfigError as e:
+        raise TrainError(str(e)) from None
+    if overrides:
+        names = {f.name for f in fields(config)}
+        for name, _ in overrides:
+            if name not in names:
+                raise TrainError(f"{path}: config has no field {name!r}; fields: {', '.join(sorted(names))}")
+        config = replace(config, **dict(overrides))
+        validate_config(config, str(path))
+    return config
+
+
+# --------------------------------------------------------------------------- environments
+class TrainingWrapper(gym.ObservationWrapper):
+    """Fixed observation scaling (hexbench.policy.OBS_SCALE) and access to the curriculum state."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.observation_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
+
+    def observation(self, observation):
+        return (observation * OBS_SCALE).astype(np.float32)
+
+    def curriculum_state(self) -> dict:
+        env = self.env.unwrapped
+        return {"level": float(env.level), "successes": int(env.curriculum_successes)}
+
+    def set_curriculum_state(self, level: float, successes: int) -> None:
+        env = self.env.unwrapped
+        env.level = float(level)
+        env.curriculum_successes = int(successes)
+
+
+def make_training_env(terrain: str, action_mode: str, residual_scale: float | None) -> gym.Env:
+    from stable_baselines3.common.monitor import Monitor
+
+    from hexbench.tasks import curriculum_config
+
+    config = curriculum_config(terrain, action_mode, residual_scale=residual_scale)
+    return TrainingWrapper(Monitor(HexapodEnv(config)))
+
+
+def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None):
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+
+    factories = [partial(make_training_env, terrain, action_mode, residual_scale) for _ in range(workers)]
+    if workers == 1:
+        return DummyVecEnv(factories)
+    return SubprocVecEnv(factories, start_method="fork")
+
+
+# --------------------------------------------------------------------------- run directory
+def git_commit(repo: Path | None = None) -> str:
+    repo = repo or Path(__file__).resolve().parent.parent
+    try:
+        head = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
+                              timeout=10).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no"],
+                               capture_output=True, text=True, timeout=10).stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return (head + ("-dirty" if dirty else "")) if head else "unknown"
+
+
+def write_json_atomic(path: Path, data: dict) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=2) + "\n")
+    tmp.replace(path)
+
+
+def read_run(run_dir: Path) -> dict | None:
+    path = Path(run_dir) / "run.json"
+    if not path.exists():
+        return None
+    try:
+        return json.loads(path.read_text())
+    except json.JSONDecodeError as e:
+        raise TrainError(f"{path}: not valid JSON ({e.msg}); move the run directory away to start afresh") from None
+
+
+def best_checkpoint(run: dict) -> dict:
+    """The best checkpoint of a run: highest mean curriculum level, then success rate, then reward."""
+    if not run.get("checkpoints"):
+        raise TrainError("run has no checkpoints yet")
+
+    def key(c):
+        reward = c.get("mean_episode_reward")
+        return (c.get("curriculum_level_mean") or 0.0, c.get("success_rate") or 0.0,
+                reward if reward is not None else -math.inf, c["env_steps"])
+    return max(run["checkpoints"], key=key)
+
+
+# --------------------------------------------------------------------------- monitoring callback
+def _nan_to_none(x: float) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def make_callback(settings: TrainSettings, run: dict, model_saver, progress=None, task=None, console=None):
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class TrainingMonitor(BaseCallback):
+        """Per-env episode stats, the progress bar, the CSV and periodic checkpoints."""
+
+        def __init__(self):
+            super().__init__()
+            n = settings.workers
+            self.returns = [deque(maxlen=METRICS_WINDOW_EPISODES) for _ in range(n)]
+            self.successes = [deque(maxlen=METRICS_WINDOW_EPISODES) for _ in range(n)]
+            self.episodes = [0] * n
+            self.wall_offset_s = float(run.get("wall_time_s", 0.0))
+            self.t0 = time.monotonic()
+            self.last_csv = self.t0
+            self.last_ckpt = self.t0
+            self.start_steps = None
+
+        def wall_time_s(self) -> float:
+            return self.wall_offset_s + time.monotonic() - self.t0
+
+        def _on_training_start(self) -> None:
+            self.start_steps = self.num_timesteps
+            self.t0 = time.monotonic()
+            self.last_csv = self.last_ckpt = self.t0
+
+        def _on_step(self) -> bool:
+            for i, info in enumerate(self.locals["infos"]):
+                ep = info.get("episode")
+                if ep is not None:
+                    self.episodes[i] += 1
+                    self.returns[i].append(float(ep["r"]))
+                    self.successes[i].append(bool(info.get("is_success", False)))
+            now = time.monotonic()
+            if progress is not None and self.n_calls % 20 == 0:
+                self._update_progress(now)
+            if now - self.last_ckpt >= settings.checkpoint_every_s:
+                self.checkpoint()
+            elif now - self.last_csv >= settings.csv_every_s:
+                self.write_csv()
+            return True
+
+        def _update_progress(self, now: float) -> None:
+            rate = (self.num_timesteps - self.start_steps) / max(now - self.t0, 1e-9)
+            s = self.summary()
+            sr = "-" if s["success_rate"] is None else f"{100 * s['success_rate']:.0f}%"
+            rw = "-" if s["mean_episode_reward"] is None else f"{s['mean_episode_reward']:.0f}"
+            progress.update(task, completed=self.num_timesteps,
+                            info=f"{rate:.0f} steps/s  level {s['curriculum_level_mean']:g}  success {sr}  reward {rw}  "
+                                 f"episodes {sum(self.episodes)}")
+
+        def curriculum(self) -> list[dict]:
+            return self.training_env.env_method("curriculum_state")
+
+        def summary(self, curriculum: list[dict] | None = None) -> dict:
+            all_r = [r for q in self.returns for r in q]
+            all_s = [s for q in self.successes for s in q]
+            levels = [c["level"] for c in curriculum] if curriculum else [
+                float(info.get("level", math.nan)) for info in self.locals.get("infos", [])] or [math.nan]
+            return {
+                "mean_episode_reward": float(np.mean(all_r)) if all_r else None,
+                "success_rate": float(np.mean(all_s)) if all_s else None,
+                "episodes": int(sum(self.episodes)),
+                "curriculum_level_mean": float(np.mean(levels)),
+                "curriculum_level_max": float(np.max(levels)),
+            }
+
+        def write_csv(self, curriculum: list[dict] | None = None) -> None:
+            curriculum = curriculum or self.curriculum()
+            path = settings.run_dir / "progress.csv"
+            new = not path.exists()
+            wall = self.wall_time_s()
+            with open(path, "a", newline="") as f:
+                w = csv.writer(f)
+                if new:
+                    w.writerow(CSV_COLUMNS)
+                for i, cur in enumerate(curriculum):
+                    r = np.mean(self.returns[i]) if self.returns[i] else math.nan
+                    s = np.mean(self.successes[i]) if self.successes[i] else math.nan
+                    w.writerow([self.num_timesteps, f"{wall:.1f}", i, self.episodes[i],
+                                "" if math.isnan(r) else f"{r:.3f}", "" if math.isnan(s) else f"{s:.3f}",
+                                f"{cur['level']:g}", cur["successes"]])
+            self.last_csv = time.monotonic()
+            if console is not None:
+                s = self.summary(curriculum)
+                console.log(f"{self.num_timesteps} env steps, {wall:.0f} s: reward {s['mean_episode_reward']}, "
+                            f"success {s['success_rate']}, level {[c['level'] for c in curriculum]}")
+
+        def checkpoint(self) -> None:
+            curriculum = self.curriculum()
+            self.write_csv(curriculum)
+            model_saver(self.model, self.num_timesteps, self.wall_time_s(), curriculum,
+                        self.summary(curriculum), self.episodes)
+            self.last_ckpt = time.monotonic()
+
+    return TrainingMonitor()
+
+
+# --------------------------------------------------------------------------- main entry
+def train(settings: TrainSettings) -> dict:
+    """Train (or resume) a run; returns the final run.json content."""
+    import torch
+
+    torch.set_num_threads(1)
+    if settings.terrain not in TRAIN_TERRAINS:
+        raise TrainError(f"unknown terrain {settings.terrain!r}; valid terrains: {', '.join(TRAIN_TERRAINS)}")
+    if settings.workers < 1:
+        raise TrainError(f"--workers must be >= 1 (got {settings.workers})")
+    if settings.total_steps < 1:
+        raise TrainError(f"--steps must be >= 1 (got {settings.total_steps})")
+    config = load_baseline_config(Path(settings.baseline_path), settings.overrides)
+    run_dir = settings.run_dir
+    previous = read_run(run_dir)
+    cfg_dict = config_dict(config)
+    if previous is not None:
+        for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
+                         ("workers", settings.workers), ("config", cfg_dict)):
+            if previous.get(key) != now:
+                raise TrainError(f"{run_dir}: holds a run with {key}={previous.get(key)!r}, not {now!r}; "
+                                 f"choose another --out or move it away")
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "checkpoints").mkdir(exist_ok=True)
+    run = previous or {
+        "method": settings.method, "baseline_file": str(settings.baseline_path),
+        "baseline_sha256": sha256_file(settings.baseline_path), "terrain": settings.terrain,
+        "seed": settings.seed, "workers": settings.workers, "config": cfg_dict,
+        "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "hexbench_commit": git_commit(),
+        "wall_time_s": 0.0, "env_steps": 0, "checkpoints": [], "curriculum": None, "sessions": [],
+    }
+    run["total_steps"] = settings.total_steps
+    run["command"] = settings.command
+    run["sessions"].append({"started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                            "command": settings.command, "hexbench_commit": git_commit(),
+                            "from_env_steps": run["env_steps"]})
+    write_json_atomic(run_dir / "run.json", run)
+
+    venv = make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale)
+    cls = algo_class(config.algo)
+    if run["checkpoints"]:
+        last = run["checkpoints"][-1]
+        path = run_dir / last["file"]
+        from hexbench.policy import verify_checkpoint
+
+        try:
+            verify_checkpoint(path, last["sha256"])
+        except CheckpointError as e:
+            venv.close()
+            raise TrainError(str(e)) from None
+        model = cls.load(path, env=venv, device="cpu")
+        if run["curriculum"]:
+            for i, cur in enumerate(run["curriculum"]):
+                venv.env_method("set_curriculum_state", cur["level"], cur["successes"], indices=[i])
+    else:
+        model = cls("MlpPolicy", venv, seed=settings.seed, device="cpu", verbose=0,
+                    policy_kwargs=policy_kwargs(config), **sb3_kwargs(config))
+
+    def save_checkpoint(model, env_steps: int, wall_time_s: float, curriculum: list[dict], summary: dict,
+                        episodes: list[int]) -> None:
+        name = f"checkpoints/step_{env_steps:010d}.zip"
+        path = run_dir / name
+        tmp = path.with_name(path.stem + ".tmp.zip")
+        model.save(tmp)
+        tmp.replace(path)
+        entry = {"file": name, "sha256": sha256_file(path), "env_steps": int(env_steps),
+                 "wall_time_s": round(wall_time_s, 1), "saved_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+                 **{k: _nan_to_none(v) if isinstance(v, float) else v for k, v in summary.items()}}
+        run["checkpoints"] = [c for c in run["checkpoints"] if c["file"] != name] + [entry]
+        run["env_steps"] = int(env_steps)
+        run["wall_time_s"] = round(wall_time_s, 1)
+        run["curriculum"] = curriculum
+        write_json_atomic(run_dir / "run.json", run)
+
+    remaining = settings.total_steps - model.num_timesteps
+    if remaining <= 0:
+        venv.close()
+        return run
+
+    from rich.console import Console
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    console = Console(stderr=True)
+    progress = Progress(TextColumn(f"[bold]{settings.method} {settings.terrain} seed {settings.seed}"), BarColumn(),
+                        MofNCompleteColumn(), TimeElapsedColumn(), TimeRemainingColumn(), TextColumn("{task.fields[info]}"),
+                        console=console, disable=not settings.show_progress, transient=False)
+    task = progress.add_task("train", total=settings.total_steps, completed=model.num_timesteps, info="starting")
+    callback = make_callback(settings, run, save_checkpoint, progress, task,
+                             console if not console.is_terminal else None)
+
+    def on_sigterm(signum, frame):
+        raise KeyboardInterrupt
+
+    old_handler = signal.signal(signal.SIGTERM, on_sigterm)
+    interrupted = False
+    try:
+        with progress:
+            model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False)
+    except KeyboardInterrupt:
+        interrupted = True
+    finally:
+        signal.signal(signal.SIGTERM, old_handler)
+    if callback.model is not None and callback.model.num_timesteps > (run["env_steps"] or 0):
+        callback.num_timesteps = callback.model.num_timesteps
+        try:
+            callback.checkpoint()
+        except (EOFError, BrokenPipeError, ConnectionError) as e:  # worker processes already gone
+            console.print(f"final checkpoint not saved ({type(e).__name__}); last one is at {run['env_steps']} steps")
+    venv.close()
+    if interrupted:
+        raise TrainError(f"interrupted at {run['env_steps']} env steps; checkpoint saved in {run_dir} "
+                         f"(run the same command to resume)")
+    return run
