@@ -30,3 +30,7 @@ for _mod in sorted(m.name for m in pkgutil.iter_modules(hexbench.commands.__path
 
 def main() -> None:  # pragma: no cover
     app()
+
+
+if __name__ == "__main__":  # python -m hexbench.cli
+    app()

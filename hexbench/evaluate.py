@@ -21,7 +21,7 @@ import socket
 import subprocess
 import sys
 import time
-from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from datetime import datetime, timezone
@@ -78,11 +78,12 @@ def _time_limit(seconds: float):
         signal.signal(signal.SIGALRM, old)
 
 
-_CONTROLLERS: dict[tuple[str, TaskSpec], object] = {}
+_CONTROLLERS: dict[tuple[str, str, TaskSpec], object] = {}
 
 
 def _controller_for(job: EpisodeJob):
-    key = (job.controller_file, job.task)
+    """One controller per (file content, task) per process, built on first use."""
+    key = (job.controller_file, file_sha256(job.controller_file), job.task)
     if key not in _CONTROLLERS:
         _CONTROLLERS[key] = make_controller(job.controller_file, job.task)
     return _CONTROLLERS[key]
@@ -313,7 +314,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
                     futures = {pool.submit(run_episode, job): job for job in todo}
                     pending = set(futures)
                     while pending:
-                        finished, pending = wait(pending, return_when=FIRST_EXCEPTION)
+                        finished, pending = wait(pending, return_when=FIRST_COMPLETED)
                         for fut in finished:
                             exc = fut.exception()
                             if exc is not None:

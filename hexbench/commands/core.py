@@ -89,11 +89,11 @@ def _register_run(app: typer.Typer) -> None:
         from hexbench.tasks import load_suite
 
         console = Console()
-        err = Console(stderr=True)
+        err = Console(stderr=True, soft_wrap=True)
         try:
             tasks = load_suite(protocol).select(terrain or None, _parse_levels(levels))
         except ValueError as e:
-            err.print(f"[red]error:[/] {e}", highlight=False)
+            typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2)
         if record:
             try:
@@ -110,10 +110,10 @@ def _register_run(app: typer.Typer) -> None:
                 result = evaluate(f, tasks, out_dir, episodes=episodes, workers=n_workers, record=record, label=name)
             except ControllerError as e:
                 result = None
-                err.print(f"[red]error:[/] {e}", highlight=False)
+                typer.echo(f"error: {e}", err=True)
             else:
                 if result.error:
-                    err.print(f"[red]error:[/] {result.error}", highlight=False)
+                    typer.echo(f"error: {result.error}", err=True)
             if result is None or result.error:
                 failed += 1
                 continue
@@ -136,7 +136,7 @@ def _register_run(app: typer.Typer) -> None:
         from hexbench.evaluate import EpisodeJob, run_episode
         from hexbench.tasks import load_suite
 
-        console, err = Console(), Console(stderr=True)
+        console = Console()
         suite = load_suite(protocol)
         failed = 0
         for f in files:
@@ -147,7 +147,7 @@ def _register_run(app: typer.Typer) -> None:
                     console.print(f"{f}: {task.name}: ok ({row['steps']} steps, {row['end_reason'] or 'running'},"
                                   f" {row['progress_m']:.2f} m)", highlight=False)
             except ControllerError as e:
-                err.print(f"[red]error:[/] {e}", highlight=False)
+                typer.echo(f"error: {e}", err=True)
                 failed += 1
         if failed:
             raise typer.Exit(1)

@@ -1,0 +1,3 @@
+from hexbench.cli import app
+
+app(prog_name="hexbench")

@@ -1,0 +1,141 @@
+"""hexbench run / check: scoring a controller file, bad controllers, resume, determinism."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from hexbench.cli import app
+from hexbench.evaluate import EpisodeJob, evaluate, run_episode
+from hexbench.tasks import load_suite
+
+REPO = Path(__file__).resolve().parent.parent
+BROKEN = REPO / "tests" / "controllers"
+CPG = str(REPO / "baselines" / "cpg.py")
+ONE_EPISODE = ["--terrain", "stairs", "--levels", "2", "--episodes", "1", "--workers", "1", "--no-record"]
+
+# file -> words its one error line must contain
+BROKEN_CASES = {
+    "syntax_error.py": "syntax error at line 1",
+    "no_make_controller.py": "defines no make_controller(task)",
+    "import_error.py": "import failed: ModuleNotFoundError",
+    "constructor_raises.py": "make_controller raised RuntimeError: weights not found",
+    "act_raises_at_step_k.py": "act() raised ValueError at step 4: policy exploded",
+    "wrong_shape.py": "action shape is (17,); expected (18,)",
+    "nan_action.py": "NaN",
+    "wrong_dtype.py": "dtype is int64",
+    "returns_none.py": "act() returned None",
+    "slow_act.py": "act() took longer than 1 s at step 2",
+    "out_of_bounds.py": "outside [-1, 1]",
+    "returns_list.py": "act() returned list",
+    "bad_action_mode.py": "action_mode is 'torque'; valid modes: joint, cpg_residual, cpg_params",
+}
+
+
+def invoke(args):
+    return CliRunner().invoke(app, args)
+
+
+@pytest.mark.parametrize("name", sorted(BROKEN_CASES))
+def test_broken_controller_gets_one_clear_line_and_no_files(name, tmp_path):
+    out = tmp_path / "out"
+    result = invoke(["run", str(BROKEN / name), *ONE_EPISODE, "--out", str(out)])
+    assert result.exit_code == 1
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, lines
+    assert name in lines[0] and BROKEN_CASES[name] in lines[0], lines[0]
+    assert not out.exists()
+
+
+def test_broken_file_does_not_stop_the_others(tmp_path):
+    out = tmp_path / "out"
+    result = invoke(["run", str(BROKEN / "nan_action.py"), CPG, *ONE_EPISODE, "--out", str(out)])
+    assert result.exit_code == 1
+    assert "nan_action.py" in result.stderr
+    assert (out / "cpg" / "result.json").exists() and (out / "cpg" / "episodes.parquet").exists()
+    assert not (out / "nan_action").exists()
+
+
+def test_unknown_terrain_and_level_list_the_valid_ones(tmp_path):
+    r = invoke(["run", CPG, "--terrain", "lava", "--out", str(tmp_path / "x")])
+    assert r.exit_code == 2 and "valid terrains: rough, slopes, stairs" in r.stderr
+    r = invoke(["run", CPG, "--terrain", "slopes", "--levels", "30", "--out", str(tmp_path / "x")])
+    assert r.exit_code == 2 and "valid levels: slopes: 6, 7, 8" in r.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_missing_controller_file(tmp_path):
+    r = invoke(["run", str(tmp_path / "nope.py"), *ONE_EPISODE, "--out", str(tmp_path / "x")])
+    assert r.exit_code == 1 and "no such controller file" in r.stderr
+
+
+def test_check_passes_cpg_and_catches_broken():
+    ok = invoke(["check", CPG, "--steps", "30"])
+    assert ok.exit_code == 0 and ok.stdout.count(": ok") == 3
+    bad = invoke(["check", str(BROKEN / "wrong_shape.py"), "--steps", "30"])
+    assert bad.exit_code == 1 and "action shape" in bad.stderr
+
+
+def test_same_job_gives_identical_outcome():
+    task = load_suite("v1").task("rough", 6)
+    job = EpisodeJob(CPG, task, 0, task.seeds(1)[0], max_steps=200)
+    assert run_episode(job) == run_episode(job)
+    other = replace(job, seed=job.seed + 1)
+    assert run_episode(other) != run_episode(job)
+
+
+def test_record_is_schema_valid_and_counts_add_up(tmp_path):
+    task = replace(load_suite("v1").task("stairs", 2), episodes=2, max_steps=120)
+    res = evaluate(CPG, [task], tmp_path / "out", workers=1, record=False, progress=False)
+    rec = res.record
+    assert rec["protocol"] == "v1" and rec["label"] == "cpg"
+    assert len(rec["episodes"]) == 2 and rec["levels"][0]["episodes"] == 2
+    assert rec["levels"][0]["seeds"] == task.seeds()
+    assert rec["controller"]["sha256"] and rec["provenance"]["git_commit"]
+    saved = json.loads((tmp_path / "out" / "result.json").read_text())
+    assert saved["episodes"] == rec["episodes"]
+    import pandas as pd
+
+    table = pd.read_parquet(tmp_path / "out" / "episodes.parquet")
+    assert list(table["episode_id"]) == ["stairs-2cm-00", "stairs-2cm-01"]
+
+
+def _strip_timing(record: dict) -> dict:
+    rec = json.loads(json.dumps(record))
+    for key in ("started_at", "wall_time_s", "command", "git_commit"):
+        rec["provenance"].pop(key)
+    return rec
+
+
+def test_interrupted_run_resumes_to_the_same_record(tmp_path):
+    args = [sys.executable, "-m", "hexbench.cli", "run", CPG, "--terrain", "stairs", "--levels", "2",
+            "--episodes", "3", "--workers", "1", "--no-record"]
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    interrupted = tmp_path / "interrupted"
+    proc = subprocess.Popen([*args, "--out", str(interrupted)], cwd=REPO, env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    journal = interrupted / ".journal"
+    deadline = time.time() + 120
+    while time.time() < deadline and not (journal.exists() and any(journal.glob("*.json"))):
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished_before = sorted(p.name for p in journal.glob("*.json"))
+    assert 1 <= len(finished_before) < 3 and not (interrupted / "result.json").exists()
+    mtimes = {p.name: p.stat().st_mtime_ns for p in journal.glob("*.json")}
+
+    subprocess.run([*args, "--out", str(interrupted)], cwd=REPO, env=env, check=True, capture_output=True)
+    for name, mtime in mtimes.items():  # finished episodes were skipped, not re-run
+        assert (journal / name).stat().st_mtime_ns == mtime
+    fresh = tmp_path / "fresh"
+    subprocess.run([*args, "--out", str(fresh)], cwd=REPO, env=env, check=True, capture_output=True)
+    resumed = json.loads((interrupted / "result.json").read_text())
+    reference = json.loads((fresh / "result.json").read_text())
+    assert _strip_timing(resumed) == _strip_timing(reference)
