@@ -9,6 +9,7 @@ Every config has these fields, read here and by hexbench.train:
     activation     "relu" or "tanh"
     residual_scale eps of eq. 6 (None: the terrain default of paper 3.2)
     log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
+    action_noise_std (optional; TD3, SAC) std of Gaussian exploration noise added to actions
 
 and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
 
@@ -37,7 +38,7 @@ ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
-                                           "log_std_init"})
+                                           "log_std_init", "action_noise_std"})
 MANIFEST_NAME = "manifest.json"
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
@@ -100,6 +101,17 @@ def sb3_kwargs(config) -> dict:
         if isinstance(v, list):
             out[k] = tuple(v)
     return out
+
+
+def action_noise(config):
+    """SB3 action noise object for a config's optional `action_noise_std` (None when absent)."""
+    std = getattr(config, "action_noise_std", None)
+    if not std:
+        return None
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    n = action_dim(config.action_mode)
+    return NormalActionNoise(mean=np.zeros(n), sigma=np.full(n, float(std)))
 
 
 def config_dict(config) -> dict:

@@ -44,7 +44,7 @@ import numpy as np
 
 from hexbench.env import OBS_HIGH, HexapodEnv
 from hexbench.policy import (
-    OBS_SCALE, CheckpointError, ConfigError, algo_class, config_dict, policy_kwargs, sb3_kwargs, sha256_file,
+    OBS_SCALE, CheckpointError, ConfigError, action_noise, algo_class, config_dict, policy_kwargs, sb3_kwargs, sha256_file,
     validate_config,
 )
 
@@ -72,6 +72,7 @@ class TrainSettings:
     overrides: tuple[tuple[str, object], ...] = ()  # config field overrides (name, value)
     command: str = ""
     show_progress: bool = True
+    fixed_level: float | None = None  # train at one level without the curriculum (epsilon sweep)
 
     @property
     def method(self) -> str:
@@ -138,19 +139,27 @@ class TrainingWrapper(gym.ObservationWrapper):
         env.curriculum_successes = int(successes)
 
 
-def make_training_env(terrain: str, action_mode: str, residual_scale: float | None) -> gym.Env:
+def make_training_env(terrain: str, action_mode: str, residual_scale: float | None,
+                      fixed_level: float | None = None) -> gym.Env:
+    """The curriculum env of paper 4.1 (or, with fixed_level, that level alone), noise on, monitored."""
     from stable_baselines3.common.monitor import Monitor
 
+    from hexbench.env import EnvConfig
     from hexbench.tasks import curriculum_config
 
-    config = curriculum_config(terrain, action_mode, residual_scale=residual_scale)
+    if fixed_level is None:
+        config = curriculum_config(terrain, action_mode, residual_scale=residual_scale)
+    else:
+        config = EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode, residual_scale=residual_scale)
     return TrainingWrapper(Monitor(HexapodEnv(config)))
 
 
-def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None):
+def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
+                 fixed_level: float | None = None):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    factories = [partial(make_training_env, terrain, action_mode, residual_scale) for _ in range(workers)]
+    factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level)
+                 for _ in range(workers)]
     if workers == 1:
         return DummyVecEnv(factories)
     return SubprocVecEnv(factories, start_method="fork")
@@ -219,6 +228,8 @@ def make_callback(settings: TrainSettings, run: dict, model_saver, progress=None
             self.last_csv = self.t0
             self.last_ckpt = self.t0
             self.start_steps = None
+            self.reward_sum = 0.0  # summed step rewards of this session, all envs
+            self.reward_steps = 0
 
         def wall_time_s(self) -> float:
             return self.wall_offset_s + time.monotonic() - self.t0
@@ -229,6 +240,9 @@ def make_callback(settings: TrainSettings, run: dict, model_saver, progress=None
             self.last_csv = self.last_ckpt = self.t0
 
         def _on_step(self) -> bool:
+            rewards = self.locals["rewards"]
+            self.reward_sum += float(np.sum(rewards))
+            self.reward_steps += len(rewards)
             for i, info in enumerate(self.locals["infos"]):
                 ep = info.get("episode")
                 if ep is not None:
@@ -265,6 +279,7 @@ def make_callback(settings: TrainSettings, run: dict, model_saver, progress=None
                 "mean_episode_reward": float(np.mean(all_r)) if all_r else None,
                 "success_rate": float(np.mean(all_s)) if all_s else None,
                 "episodes": int(sum(self.episodes)),
+                "mean_step_reward": self.reward_sum / self.reward_steps if self.reward_steps else None,
                 "curriculum_level_mean": float(np.mean(levels)),
                 "curriculum_level_max": float(np.max(levels)),
             }
@@ -318,7 +333,8 @@ def train(settings: TrainSettings) -> dict:
     cfg_dict = config_dict(config)
     if previous is not None:
         for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
-                         ("workers", settings.workers), ("config", cfg_dict)):
+                         ("workers", settings.workers), ("config", cfg_dict),
+                         ("fixed_level", settings.fixed_level)):
             if previous.get(key) != now:
                 raise TrainError(f"{run_dir}: holds a run with {key}={previous.get(key)!r}, not {now!r}; "
                                  f"choose another --out or move it away")
@@ -327,7 +343,7 @@ def train(settings: TrainSettings) -> dict:
     run = previous or {
         "method": settings.method, "baseline_file": str(settings.baseline_path),
         "baseline_sha256": sha256_file(settings.baseline_path), "terrain": settings.terrain,
-        "seed": settings.seed, "workers": settings.workers, "config": cfg_dict,
+        "seed": settings.seed, "workers": settings.workers, "config": cfg_dict, "fixed_level": settings.fixed_level,
         "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "hexbench_commit": git_commit(),
         "wall_time_s": 0.0, "env_steps": 0, "checkpoints": [], "curriculum": None, "sessions": [],
     }
@@ -338,7 +354,8 @@ def train(settings: TrainSettings) -> dict:
                             "from_env_steps": run["env_steps"]})
     write_json_atomic(run_dir / "run.json", run)
 
-    venv = make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale)
+    venv = make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale,
+                        settings.fixed_level)
     cls = algo_class(config.algo)
     if run["checkpoints"]:
         last = run["checkpoints"][-1]
@@ -350,13 +367,15 @@ def train(settings: TrainSettings) -> dict:
         except CheckpointError as e:
             venv.close()
             raise TrainError(str(e)) from None
-        model = cls.load(path, env=venv, device="cpu")
+        extra = {"action_noise": action_noise(config)} if action_noise(config) is not None else {}
+        model = cls.load(path, env=venv, device="cpu", **extra)
         if run["curriculum"]:
             for i, cur in enumerate(run["curriculum"]):
                 venv.env_method("set_curriculum_state", cur["level"], cur["successes"], indices=[i])
     else:
+        extra = {"action_noise": action_noise(config)} if action_noise(config) is not None else {}
         model = cls("MlpPolicy", venv, seed=settings.seed, device="cpu", verbose=0,
-                    policy_kwargs=policy_kwargs(config), **sb3_kwargs(config))
+                    policy_kwargs=policy_kwargs(config), **sb3_kwargs(config), **extra)
 
     def save_checkpoint(model, env_steps: int, wall_time_s: float, curriculum: list[dict], summary: dict,
                         episodes: list[int]) -> None:
@@ -413,3 +432,59 @@ def train(settings: TrainSettings) -> dict:
         raise TrainError(f"interrupted at {run['env_steps']} env steps; checkpoint saved in {run_dir} "
                          f"(run the same command to resume)")
     return run
+
+
+# --------------------------------------------------------------------------- publishing
+def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> dict:
+    """Copy a run's checkpoint (best, last, or a step count) as shipped policy-only weights.
+
+    Writes <dest_dir>/<method>-<terrain>.zip (policy state_dict only, no pickled data) and its entry
+    in <dest_dir>/manifest.json: sha256, command, env-step budget and steps reached, seed, wall
+    time, hexbench commit, metrics at that checkpoint and whether the run was complete.
+    """
+    from hexbench.policy import MANIFEST_NAME, load_policy_weights, save_policy_weights
+
+    run_dir, dest_dir = Path(run_dir), Path(dest_dir)
+    run = read_run(run_dir)
+    if run is None:
+        raise TrainError(f"{run_dir}: no run.json (not a training run directory)")
+    if not run.get("checkpoints"):
+        raise TrainError(f"{run_dir}: run has no checkpoints yet")
+    if which == "best":
+        chosen = best_checkpoint(run)
+    elif which == "last":
+        chosen = run["checkpoints"][-1]
+    else:
+        matches = [c for c in run["checkpoints"] if str(c["env_steps"]) == which]
+        if not matches:
+            have = ", ".join(str(c["env_steps"]) for c in run["checkpoints"])
+            raise TrainError(f"{run_dir}: no checkpoint {which!r}; valid: best, last, {have}")
+        chosen = matches[0]
+    try:
+        state = load_policy_weights(run_dir / chosen["file"], chosen["sha256"])
+    except CheckpointError as e:
+        raise TrainError(str(e)) from None
+    dest_dir.mkdir(parents=True, exist_ok=True)
+    key = f"{run['method']}-{run['terrain']}"
+    sha = save_policy_weights(state, dest_dir / f"{key}.zip")
+    manifest_path = dest_dir / MANIFEST_NAME
+    manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {
+        "format": 1, "note": "shipped baseline weights: policy state_dict only (SB3 zip without pickled data); "
+                             "written by `hexbench checkpoints publish`", "checkpoints": {}}
+    complete = chosen["env_steps"] >= run["total_steps"]
+    manifest["checkpoints"][key] = {
+        "file": f"{key}.zip", "sha256": sha, "method": run["method"], "terrain": run["terrain"],
+        "algo": run["config"]["algo"], "action_mode": run["config"]["action_mode"], "seed": run["seed"],
+        "command": run["sessions"][0]["command"] if run.get("sessions") else run.get("command", ""),
+        "env_step_budget": run["total_steps"], "env_steps": chosen["env_steps"],
+        "wall_time_s": chosen["wall_time_s"], "workers": run["workers"],
+        "hexbench_commit": run["hexbench_commit"], "baseline_sha256": run["baseline_sha256"],
+        "source_checkpoint_sha256": chosen["sha256"], "complete": complete,
+        "status": ("complete run" if complete else
+                   f"PARTIAL run: best-so-far checkpoint at {chosen['env_steps']} of {run['total_steps']} env steps"),
+        "metrics_at_checkpoint": {k: chosen.get(k) for k in ("mean_episode_reward", "success_rate", "episodes",
+                                                             "curriculum_level_mean", "curriculum_level_max")},
+        "published_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    write_json_atomic(manifest_path, manifest)
+    return manifest["checkpoints"][key]

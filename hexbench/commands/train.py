@@ -44,3 +44,53 @@ def register(app: typer.Typer) -> None:
         if last:
             err.print(f"done: {run['env_steps']} env steps, {run['wall_time_s']:.0f} s; "
                       f"last checkpoint {settings.run_dir / last['file']}", highlight=False)
+
+    checkpoints = typer.Typer(help="Shipped baseline weights: publish a run's checkpoint, verify the manifest.",
+                              no_args_is_help=True)
+    app.add_typer(checkpoints, name="checkpoints")
+
+    @checkpoints.command("publish")
+    def publish_command(
+        run_dir: Path = typer.Argument(..., help="training run directory (holds run.json)"),
+        which: str = typer.Option("best", "--checkpoint", help="best, last, or the env-step count of one"),
+        dest: Path = typer.Option(Path("baselines/checkpoints"), "--dest", help="shipped checkpoints folder"),
+    ) -> None:
+        """Copy a run's checkpoint (policy weights only) into baselines/checkpoints/ with its manifest entry."""
+        from rich.console import Console
+
+        from hexbench.train import TrainError, publish_checkpoint
+
+        console = Console(stderr=True)
+        try:
+            entry = publish_checkpoint(run_dir, dest, which)
+        except TrainError as e:
+            console.print(f"[red]error:[/red] {e}", highlight=False)
+            raise typer.Exit(2) from None
+        console.print(f"published {dest / entry['file']} ({entry['status']}; sha256 {entry['sha256'][:12]}...)",
+                      highlight=False)
+
+    @checkpoints.command("verify")
+    def verify_command(
+        dest: Path = typer.Option(Path("baselines/checkpoints"), "--dir", help="shipped checkpoints folder"),
+    ) -> None:
+        """Check every shipped checkpoint's sha256 against the manifest."""
+        from rich.console import Console
+
+        from hexbench.policy import CheckpointError, read_manifest, verify_checkpoint
+
+        console = Console(stderr=True)
+        try:
+            manifest = read_manifest(dest)
+        except CheckpointError as e:
+            console.print(f"[red]error:[/red] {e}", highlight=False)
+            raise typer.Exit(2) from None
+        bad = 0
+        for key, entry in sorted(manifest["checkpoints"].items()):
+            try:
+                verify_checkpoint(dest / entry["file"], entry["sha256"])
+                console.print(f"ok   {key}: {entry.get('status', '')}", highlight=False)
+            except CheckpointError as e:
+                bad += 1
+                console.print(f"[red]bad[/red]  {key}: {e}", highlight=False)
+        if bad:
+            raise typer.Exit(1)
