@@ -21,6 +21,7 @@ def register(app: typer.Typer) -> None:
         steps: int = typer.Option(4096, "--steps", help="env steps per trial; the paper uses 100000"),
         baseline: Path = typer.Option(Path("baselines/ppo_cpg.py"), "--baseline", help="cpg_residual baseline file"),
         out: Path = typer.Option(None, "--out", help="sweep folder [default: training/sweep-epsilon-<terrain>]"),
+        override: list[str] = typer.Option([], "--set", help="override a CONFIG field, NAME=VALUE (repeatable)"),
     ) -> None:
         """Train PPO-CPG at the terrain's hardest level for each eps; report the best (paper 3.2)."""
         from rich.console import Console
@@ -28,16 +29,21 @@ def register(app: typer.Typer) -> None:
         from rich.table import Table
 
         from hexbench.sweep import PAPER_EPS, EpsilonSweep, best_eps, run_sweep
-        from hexbench.train import TrainError
+        from hexbench.train import TrainError, parse_override
 
         console = Console(stderr=True)
         try:
             eps_values = tuple(float(v) for v in values.split(",") if v.strip())
         except ValueError:
-            console.print(f"[red]error:[/red] --values {values!r} is not a comma-separated list of numbers in [0, 1]")
+            console.print(f"[red]error:[/red] --values {values!r} is not a comma-separated list of numbers in [0, 1]", soft_wrap=True)
+            raise typer.Exit(2) from None
+        try:
+            overrides = tuple(parse_override(o) for o in override)
+        except TrainError as e:
+            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
         spec = EpsilonSweep(terrain=terrain, baseline_path=baseline, eps_values=eps_values, trials=trials,
-                            steps_per_trial=steps, out_dir=out)
+                            steps_per_trial=steps, out_dir=out, overrides=overrides)
         total = len(eps_values) * max(trials, 1)
         with Progress(console=console) as progress:
             task = progress.add_task(f"eps sweep {terrain}", total=total)
@@ -45,7 +51,7 @@ def register(app: typer.Typer) -> None:
                 rows = run_sweep(spec, "hexbench " + shlex.join(sys.argv[1:]),
                                  progress_callback=lambda row: progress.advance(task))
             except TrainError as e:
-                console.print(f"[red]error:[/red] {e}", highlight=False)
+                console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
                 raise typer.Exit(2) from None
         best, means = best_eps(rows)
         table = Table(title=f"eps sweep, {terrain} level {spec.level:g}, {trials} trial(s) x {steps} steps")

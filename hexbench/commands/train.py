@@ -38,12 +38,12 @@ def register(app: typer.Typer) -> None:
             )
             run = train(settings)
         except TrainError as e:
-            err.print(f"[red]error:[/red] {e}", highlight=False)
+            err.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
         last = run["checkpoints"][-1] if run["checkpoints"] else None
         if last:
             err.print(f"done: {run['env_steps']} env steps, {run['wall_time_s']:.0f} s; "
-                      f"last checkpoint {settings.run_dir / last['file']}", highlight=False)
+                      f"last checkpoint {settings.run_dir / last['file']}", highlight=False, soft_wrap=True)
 
     checkpoints = typer.Typer(help="Shipped baseline weights: publish a run's checkpoint, verify the manifest.",
                               no_args_is_help=True)
@@ -64,10 +64,10 @@ def register(app: typer.Typer) -> None:
         try:
             entry = publish_checkpoint(run_dir, dest, which)
         except TrainError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False)
+            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
         console.print(f"published {dest / entry['file']} ({entry['status']}; sha256 {entry['sha256'][:12]}...)",
-                      highlight=False)
+                      highlight=False, soft_wrap=True)
 
     @checkpoints.command("verify")
     def verify_command(
@@ -82,15 +82,36 @@ def register(app: typer.Typer) -> None:
         try:
             manifest = read_manifest(dest)
         except CheckpointError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False)
+            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
         bad = 0
         for key, entry in sorted(manifest["checkpoints"].items()):
             try:
                 verify_checkpoint(dest / entry["file"], entry["sha256"])
-                console.print(f"ok   {key}: {entry.get('status', '')}", highlight=False)
+                console.print(f"ok   {key}: {entry.get('status', '')}", highlight=False, soft_wrap=True)
             except CheckpointError as e:
                 bad += 1
-                console.print(f"[red]bad[/red]  {key}: {e}", highlight=False)
+                console.print(f"[red]bad[/red]  {key}: {e}", highlight=False, soft_wrap=True)
         if bad:
             raise typer.Exit(1)
+
+    @app.command("curves")
+    def curves_command(
+        sources: list[Path] = typer.Argument(..., help="run directories (training/...) or progress CSVs"),
+        out: Path = typer.Option(..., "--out", help="PNG to write, e.g. leaderboard/curves/rough.png"),
+        title: str = typer.Option("", "--title", help="figure title"),
+        copy_csv: bool = typer.Option(True, "--copy-csv/--no-copy-csv", help="copy run CSVs next to the PNG"),
+    ) -> None:
+        """Plot episode reward and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
+        from rich.console import Console
+
+        from hexbench.curves import CurvesError, plot_curves
+
+        console = Console(stderr=True)
+        try:
+            written = plot_curves(sources, out, title, copy_csv)
+        except (CurvesError, OSError, ValueError) as e:
+            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            raise typer.Exit(2) from None
+        for path in written:
+            console.print(f"wrote {path}", highlight=False, soft_wrap=True)

@@ -1,0 +1,101 @@
+"""Learning curves (paper Fig. 4): episode reward and curriculum level vs env steps, from runs' progress.csv.
+
+    hexbench curves training/ppo_cpg-rough-seed0 training/ppo-rough-seed0 --out leaderboard/curves/rough.png
+
+Each run directory contributes one line per panel: at every logged env-step count, the mean over
+its envs of the mean episode reward of their last 20 episodes, and the mean curriculum level. A run
+that has not reached its env-step budget is labelled "partial: N of M steps". The CSVs plotted are
+copied next to the PNG as <method>-<terrain>-seed<S>.csv, so the figure can be regenerated from
+committed data alone (`hexbench curves leaderboard/curves/*.csv`).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+
+from hexbench.train import CSV_COLUMNS
+
+
+class CurvesError(Exception):
+    """A run or CSV cannot be plotted; the message is one line."""
+
+
+def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
+    """(per-step aggregate over envs, label, run.json or None) for a run directory or a progress CSV."""
+    source = Path(source)
+    run = None
+    if source.is_dir():
+        csv_path = source / "progress.csv"
+        run_path = source / "run.json"
+        run = json.loads(run_path.read_text()) if run_path.exists() else None
+    else:
+        csv_path = source
+        side = source.with_suffix(".run.json")
+        run = json.loads(side.read_text()) if side.exists() else None
+    if not csv_path.is_file():
+        raise CurvesError(f"{source}: no progress CSV (expected {csv_path})")
+    df = pd.read_csv(csv_path)
+    missing = [c for c in CSV_COLUMNS if c not in df.columns]
+    if missing:
+        raise CurvesError(f"{csv_path}: not a hexbench progress CSV (missing columns: {', '.join(missing)})")
+    agg = df.groupby("env_steps", as_index=False).agg(
+        wall_time_s=("wall_time_s", "max"), mean_episode_reward=("mean_episode_reward", "mean"),
+        success_rate=("success_rate", "mean"), curriculum_level=("curriculum_level", "mean"),
+        episodes=("episodes", "sum"))
+    if run:
+        label = f"{run['method']} {run['terrain']} seed {run['seed']}"
+        if run.get("env_steps", 0) < run.get("total_steps", 0) or agg["env_steps"].max() < run.get("total_steps", 0):
+            label += f" (partial: {int(agg['env_steps'].max()):,} of {run['total_steps']:,} steps)"
+    else:
+        label = csv_path.stem
+    return agg, label, run
+
+
+def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: bool = True) -> list[Path]:
+    """Write the two-panel PNG (and copies of the CSVs next to it); returns the files written."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if not sources:
+        raise CurvesError("no runs given; pass run directories (training/...) or progress CSVs")
+    loaded = [load_progress(Path(s)) for s in sources]
+    fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
+    for agg, label, _run in loaded:
+        ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], label=label)
+        ax_l.step(agg["env_steps"], agg["curriculum_level"], where="post", label=label)
+    ax_r.set_ylabel("mean episode reward\n(last 20 episodes per env)")
+    ax_l.set_ylabel("curriculum level\n(cm or deg)")
+    ax_l.set_xlabel("env steps")
+    ax_r.legend(fontsize=8)
+    ax_r.grid(alpha=0.3)
+    ax_l.grid(alpha=0.3)
+    fig.suptitle(title or "hexbench learning curves")
+    fig.tight_layout()
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_png.with_name(out_png.stem + ".tmp.png")
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    tmp.replace(out_png)
+    written = [out_png]
+    if copy_csv:
+        for source, (_agg, _label, run) in zip(sources, loaded):
+            source = Path(source)
+            if source.is_dir() and run:
+                stem = f"{run['method']}-{run['terrain']}-seed{run['seed']}"
+                dest = out_png.parent / f"{stem}.csv"
+                shutil.copyfile(source / "progress.csv", dest)
+                summary = {k: run.get(k) for k in ("method", "terrain", "seed", "workers", "total_steps", "env_steps",
+                                                   "wall_time_s", "started_utc", "hexbench_commit", "config")}
+                summary["command"] = run["sessions"][0]["command"] if run.get("sessions") else run.get("command")
+                summary["partial"] = run.get("env_steps", 0) < run.get("total_steps", 0)
+                side = dest.with_suffix(".run.json")
+                side.write_text(json.dumps(summary, indent=2) + "\n")
+                written += [dest, side]
+    return written

@@ -1,0 +1,168 @@
+"""Training machinery: `hexbench train` smoke runs per baseline, resume, checkpoint publish/load round
+trip, corrupt or tampered checkpoints refused, epsilon sweep and learning curves."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from hexbench.cli import app
+from hexbench.policy import CheckpointError, make_policy_controller, scale_observation
+
+REPO = Path(__file__).resolve().parent.parent
+BASELINES = REPO / "baselines"
+# Tiny learner settings so a smoke run takes seconds: one short rollout / a few updates.
+TINY_PPO = ["--set", "n_steps=64", "--set", "batch_size=32", "--set", "n_epochs=1"]
+TINY_OFF_POLICY = ["--set", "learning_starts=32", "--set", "batch_size=32", "--set", "buffer_size=1000"]
+OFF_POLICY = ("sac", "td3", "sac_cpg", "td3_cpg")
+
+
+def run_cli(*args: str):
+    return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
+
+
+def train_tiny(method: str, out: Path, steps: int = 64, terrain: str = "rough", extra: tuple[str, ...] = ()):
+    tiny = TINY_OFF_POLICY if method in OFF_POLICY else TINY_PPO
+    return run_cli("train", BASELINES / f"{method}.py", "--terrain", terrain, "--steps", steps, "--out", out,
+                   "--no-progress", *tiny, *extra)
+
+
+def load_baseline(method: str):
+    spec = importlib.util.spec_from_file_location(f"baseline_{method}", BASELINES / f"{method}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def check_run_dir(out: Path, min_steps: int) -> dict:
+    run = json.loads((out / "run.json").read_text())
+    assert run["env_steps"] >= min_steps
+    last = run["checkpoints"][-1]
+    assert (out / last["file"]).is_file()
+    header = (out / "progress.csv").read_text().splitlines()[0]
+    assert header.startswith("env_steps,wall_time_s,env_index,episodes,mean_episode_reward,success_rate,curriculum_level")
+    assert run["curriculum"][0]["level"] == 5.0  # rough curriculum starts at 5 cm
+    return run
+
+
+def test_ppo_cpg_smoke_run_writes_checkpoint_csv_and_resumes(tmp_path):
+    out = tmp_path / "run"
+    result = train_tiny("ppo_cpg", out, steps=64)
+    assert result.exit_code == 0, result.output
+    run = check_run_dir(out, 64)
+    assert run["config"]["learning_rate"] == 1e-4 and run["config"]["net_arch"] == [256, 256, 256, 256]
+    assert run["config"]["n_steps"] == 64  # the --set override is recorded
+    # Same command with a larger budget resumes from the verified last checkpoint.
+    result = train_tiny("ppo_cpg", out, steps=128)
+    assert result.exit_code == 0, result.output
+    run = check_run_dir(out, 128)
+    assert len(run["sessions"]) == 2 and run["sessions"][1]["from_env_steps"] == 64
+    assert [c["env_steps"] for c in run["checkpoints"]] == [64, 128]
+
+
+def test_resume_refuses_tampered_training_checkpoint(tmp_path):
+    out = tmp_path / "run"
+    assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
+    run = json.loads((out / "run.json").read_text())
+    with open(out / run["checkpoints"][-1]["file"], "ab") as f:
+        f.write(b"tampered")
+    result = train_tiny("ppo_cpg", out, steps=128)
+    assert result.exit_code == 2
+    assert "sha256" in result.output and "refusing to load" in result.output
+
+
+def test_bad_terrain_and_bad_override_give_one_line_and_no_files(tmp_path):
+    out = tmp_path / "run"
+    result = run_cli("train", BASELINES / "ppo_cpg.py", "--terrain", "moon", "--out", out)
+    assert result.exit_code == 2
+    assert "unknown terrain 'moon'; valid terrains: rough, slopes, stairs" in result.output
+    result = run_cli("train", BASELINES / "ppo_cpg.py", "--terrain", "rough", "--out", out, "--set", "nope=1")
+    assert result.exit_code == 2 and "config has no field 'nope'" in result.output
+    assert not out.exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("method", ["ppo", "hrl", "sac", "td3", "sac_cpg", "td3_cpg"])
+def test_every_baseline_trains_through_the_cli(tmp_path, method):
+    out = tmp_path / method
+    result = train_tiny(method, out, steps=96, terrain="stairs")
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["config"]["action_mode"] == load_baseline(method).CONFIG.action_mode
+    assert run["env_steps"] >= 96
+
+
+def test_publish_then_controller_acts_like_the_trained_policy(tmp_path):
+    from stable_baselines3 import PPO
+
+    from hexbench.env import HexapodEnv
+    from hexbench.tasks import load_suite
+
+    out, dest = tmp_path / "run", tmp_path / "checkpoints"
+    assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
+    result = run_cli("checkpoints", "publish", out, "--dest", dest)
+    assert result.exit_code == 0, result.output
+    manifest = json.loads((dest / "manifest.json").read_text())
+    entry = manifest["checkpoints"]["ppo_cpg-rough"]
+    for key in ("sha256", "command", "env_step_budget", "env_steps", "seed", "wall_time_s", "hexbench_commit"):
+        assert key in entry
+    assert entry["complete"] and entry["env_steps"] == 64
+
+    task = load_suite().task("rough", 5)
+    ctrl = make_policy_controller(load_baseline("ppo_cpg").CONFIG, dest, "ppo_cpg", "rough")
+    assert ctrl.action_mode == "cpg_residual"
+    env = HexapodEnv(task.env_config("cpg_residual"))
+    obs, _ = env.reset(seed=3)
+    ctrl.reset(3)
+    action = ctrl.act(obs)
+    env.close()
+    assert action.shape == (18,) and np.all(np.abs(action) <= 1.0)
+    run = json.loads((out / "run.json").read_text())
+    model = PPO.load(out / run["checkpoints"][-1]["file"], device="cpu")
+    expected, _ = model.predict(scale_observation(obs), deterministic=True)
+    np.testing.assert_allclose(action, np.clip(expected, -1, 1), atol=1e-6)
+    assert run_cli("checkpoints", "verify", "--dir", dest).exit_code == 0
+
+
+def test_corrupt_missing_or_unlisted_shipped_checkpoint_is_refused(tmp_path):
+    out, dest = tmp_path / "run", tmp_path / "checkpoints"
+    assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
+    assert run_cli("checkpoints", "publish", out, "--dest", dest).exit_code == 0
+    config = load_baseline("ppo_cpg").CONFIG
+    with pytest.raises(CheckpointError, match="no checkpoint 'ppo_cpg-stairs'"):
+        make_policy_controller(config, dest, "ppo_cpg", "stairs")
+    zip_path = dest / "ppo_cpg-rough.zip"
+    data = bytearray(zip_path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    zip_path.write_bytes(bytes(data))
+    with pytest.raises(CheckpointError, match="corrupt or tampered"):
+        make_policy_controller(config, dest, "ppo_cpg", "rough")
+    result = run_cli("checkpoints", "verify", "--dir", dest)
+    assert result.exit_code == 1 and "does not match the manifest" in result.output
+    zip_path.unlink()
+    with pytest.raises(CheckpointError, match="checkpoint file missing"):
+        make_policy_controller(config, dest, "ppo_cpg", "rough")
+
+
+def test_epsilon_sweep_and_learning_curves(tmp_path):
+    sweep_dir = tmp_path / "sweep"
+    result = run_cli("sweep", "epsilon", "--terrain", "stairs", "--values", "0.2,0.6", "--steps", 64,
+                     "--out", sweep_dir, *TINY_PPO)
+    assert result.exit_code == 0, result.output
+    assert "best eps" in result.output
+    rows = (sweep_dir / "epsilon.csv").read_text().splitlines()
+    assert rows[0].startswith("eps,trial,seed,level") and len(rows) == 3
+    assert rows[1].split(",")[3] == "8.0"  # the hardest stairs level of the curriculum
+
+    png = tmp_path / "curves" / "stairs.png"
+    result = run_cli("curves", sweep_dir / "eps0.20-trial0", sweep_dir / "eps0.60-trial0", "--out", png)
+    assert result.exit_code == 0, result.output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (png.parent / "ppo_cpg-stairs-seed0.csv").is_file()
+    bad = run_cli("curves", tmp_path / "nowhere", "--out", png)
+    assert bad.exit_code == 2 and "no progress CSV" in bad.output
