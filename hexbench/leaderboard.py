@@ -497,17 +497,24 @@ def render_readme(board: Board) -> str:
     for terrain in suite.terrains:
         unit = suite.task(terrain, suite.levels(terrain)[0]).unit
         out.append(f"## {TERRAIN_TITLES.get(terrain, terrain)} ({TERRAIN_AXES.get(terrain, 'level')} in {unit})\n")
-        if board.measured:
-            ranks = board.terrain_ranks[terrain]
-            header = ["Rank", "Controller", "Hardest level passed", "AUC", "Headroom AUC", "Mean speed [m/s]",
-                      "Roll RMS [deg]", "Pitch RMS [deg]", "Episodes"]
-            rows = []
-            for r in sorted(board.measured, key=lambda r: (ranks[r.label], r.label)):
-                s = r.terrain(terrain)
-                rows.append([str(ranks[r.label]), r.label, fmt_level(s["hardest_level_passed"], unit),
-                             fmt_num(s["auc"]), fmt_num(s["headroom_auc"]),
-                             fmt_num(s["mean_forward_speed_m_per_s"], 3), fmt_num(s.get("mean_roll_rms_deg"), 1),
-                             fmt_num(s.get("mean_pitch_rms_deg"), 1), str(s["episodes"])])
+        ranks = board.terrain_ranks[terrain]
+        header = ["Rank", "Controller", "Hardest level passed", "AUC", "Headroom AUC", "Mean speed [m/s]",
+                  "Roll RMS [deg]", "Pitch RMS [deg]", "Episodes"]
+        rows = []
+        for r in sorted(board.measured, key=lambda r: (ranks[r.label], r.label)):
+            s = r.terrain(terrain)
+            rows.append([str(ranks[r.label]), r.label, fmt_level(s["hardest_level_passed"], unit),
+                         fmt_num(s["auc"]), fmt_num(s["headroom_auc"]),
+                         fmt_num(s["mean_forward_speed_m_per_s"], 3), fmt_num(s.get("mean_roll_rms_deg"), 1),
+                         fmt_num(s.get("mean_pitch_rms_deg"), 1), str(s["episodes"])])
+        for r in board.reported:  # beside the measured rows, never ranked
+            s = r.terrain(terrain)
+            if s is not None:
+                rows.append(["ref.", reported_name(r), fmt_level(s["hardest_level_passed"], unit), fmt_num(s["auc"]),
+                             "–", "–", "–", "–", f"{s['episodes']} (paper's trials)"])
+        if rows:
+            out.append("Ranked summary (measured entries; `ref.` rows are the paper's, unranked; AUC of a reference "
+                       "row only where it covers every Table 4 level):\n")
             out.append(_md_table(header, rows, ["r", "l"] + ["r"] * (len(header) - 2)) + "\n")
         paper_levels = suite.levels(terrain, include_headroom=False)
         out.append(f"Success rate per level, laid out like paper Table 4 (level in {unit}); measured entries with "
