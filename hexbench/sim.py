@@ -18,17 +18,17 @@ import numpy as np
 
 
 def _import_pybullet_quietly():
-    """Import pybullet without its 'pybullet build time' banner on stdout (it pollutes CLI output)."""
+    """Import pybullet without the 'pybullet build time' banner it writes to stderr on import."""
     import sys
 
-    sys.stdout.flush()
-    saved = os.dup(1)
+    sys.stderr.flush()
+    saved = os.dup(2)
     devnull = os.open(os.devnull, os.O_WRONLY)
     try:
-        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)
         import pybullet
     finally:
-        os.dup2(saved, 1)
+        os.dup2(saved, 2)
         os.close(saved)
         os.close(devnull)
     return pybullet
