@@ -139,3 +139,10 @@ def test_interrupted_run_resumes_to_the_same_record(tmp_path):
     resumed = json.loads((interrupted / "result.json").read_text())
     reference = json.loads((fresh / "result.json").read_text())
     assert _strip_timing(resumed) == _strip_timing(reference)
+
+
+def test_two_workers_give_the_same_record_as_one(tmp_path):
+    task = replace(load_suite("v1").task("rough", 8), episodes=3, max_steps=90)
+    one = evaluate(CPG, [task], tmp_path / "w1", workers=1, record=False, progress=False).record
+    two = evaluate(CPG, [task], tmp_path / "w2", workers=2, record=False, progress=False).record
+    assert one["episodes"] == two["episodes"] and one["levels"] == two["levels"]

@@ -51,3 +51,11 @@ def test_unknown_protocol_lists_valid_ones():
 def test_select_levels_in_paper_units():
     tasks = load_suite("v1").select(["stairs", "rough"], [5, 5.5])
     assert sorted((t.terrain, t.level) for t in tasks) == [("rough", 5.0), ("stairs", 5.0), ("stairs", 5.5)]
+
+
+def test_readme_lists_every_registered_id(repo):
+    from hexbench.tasks import registered_ids
+
+    readme = (repo / "README.md").read_text()
+    missing = [i for i in registered_ids() if f"`{i}`" not in readme]
+    assert not missing, f"README lacks {len(missing)} ids, e.g. {missing[:3]}"
