@@ -146,3 +146,12 @@ def test_two_workers_give_the_same_record_as_one(tmp_path):
     one = evaluate(CPG, [task], tmp_path / "w1", workers=1, record=False, progress=False).record
     two = evaluate(CPG, [task], tmp_path / "w2", workers=2, record=False, progress=False).record
     assert one["episodes"] == two["episodes"] and one["levels"] == two["levels"]
+
+
+def test_list_shows_levels_and_every_id():
+    from hexbench.tasks import registered_ids
+
+    r = invoke(["list", "--ids"])
+    assert r.exit_code == 0
+    assert "5.5" in r.stdout and "headroom" in r.stdout
+    assert all(i in r.stdout for i in registered_ids())

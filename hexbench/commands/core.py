@@ -9,7 +9,8 @@ def register(app: typer.Typer) -> None:
     _register_run(app)
 
     @app.command("list")
-    def list_tasks(protocol: str = typer.Option("v1", help="protocol version")) -> None:
+    def list_tasks(protocol: str = typer.Option("v1", help="protocol version"),
+                   ids: bool = typer.Option(False, "--ids", help="print every Gymnasium id")) -> None:
         """List terrains, levels and Gymnasium task ids."""
         from rich.console import Console
         from rich.table import Table
@@ -27,8 +28,13 @@ def register(app: typer.Typer) -> None:
                           ", ".join(format_level(t.level) for t in tasks if t.headroom))
         console = Console()
         console.print(table)
-        ids = registered_ids()
-        console.print(f"{len(ids)} Gymnasium ids registered, e.g. {ids[0]} ... {ids[-1]}")
+        all_ids = registered_ids()
+        if ids:
+            for gid in all_ids:
+                console.print(gid, highlight=False, soft_wrap=True)
+        else:
+            console.print(f"{len(all_ids)} Gymnasium ids registered (--ids lists them), e.g. "
+                          f"{load_suite(protocol).tasks[0].gym_id('cpg_residual')}", highlight=False, soft_wrap=True)
 
 
 def _parse_levels(text: str | None) -> list[float] | None:
