@@ -623,6 +623,7 @@ def plot_svg(board: Board, terrain: str) -> str:
     """Success vs level for one terrain as an SVG string (deterministic bytes)."""
     import matplotlib
     from matplotlib.figure import Figure
+    from matplotlib.ticker import MaxNLocator
 
     suite = board.suite
     unit = suite.task(terrain, suite.levels(terrain)[0]).unit
@@ -664,6 +665,7 @@ def plot_svg(board: Board, terrain: str) -> str:
             for bar in container[2]:
                 bar.set_alpha(0.55)
             measured_handles.append(container)
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         ax.set_xlim(min(levels_all) - 0.25, x_max)
         ax.set_ylim(-0.02, 1.04)
         ax.set_yticks([0, 0.2, 0.4, 0.6, 0.8, 1.0], ["0%", "20%", "40%", "60%", "80%", "100%"])
@@ -688,6 +690,11 @@ def plot_svg(board: Board, terrain: str) -> str:
     svg = buf.getvalue()
     svg = svg[svg.index("<svg"):]  # drop the XML declaration and DOCTYPE for inlining in HTML
     svg = re.sub(r'<svg([^>]*?) width="[^"]+" height="[^"]+"', r'<svg\1', svg, count=1)
+    # Three plots share one page: prefix every element id (and its references) with the terrain.
+    ids = set(re.findall(r'\bid="([^"]+)"', svg)) - {f"plot-{terrain}"}
+    svg = re.sub(r'\bid="([^"]+)"', lambda m: f'id="{terrain}-{m.group(1)}"' if m.group(1) in ids else m.group(0), svg)
+    svg = re.sub(r'(url\(#|href="#)([^)"]+)', lambda m: f"{m.group(1)}{terrain}-{m.group(2)}"
+                 if m.group(2) in ids else m.group(0), svg)
     svg = svg.replace("<svg", f'<svg role="img" aria-label="{TERRAIN_TITLES.get(terrain, terrain)}: success rate '
                       'versus level"', 1)
     return svg.strip() + "\n"
@@ -923,11 +930,15 @@ def slug(label: str) -> str:
     return s or "record"
 
 
-def add(result_path: str | Path, directory: str | Path = "leaderboard", replace: bool = False) -> Path:
+def add(result_path: str | Path, directory: str | Path = "leaderboard", replace: bool = False,
+        protocol: str = DEFAULT_PROTOCOL) -> Path:
     """Validate a record and copy it into `directory` as <slug(label)>.json; RecordError if refused."""
     result_path, directory = Path(result_path), Path(directory)
     record = read_record(result_path)
     rows = rows_of(record, str(result_path))
+    if record["protocol"] != protocol:
+        raise RecordError(f"{result_path}: record is protocol {record['protocol']}, this leaderboard shows {protocol} "
+                          "(records of different protocols are never mixed; pass --protocol to choose)")
     if not directory.is_dir():
         raise RecordError(f"{directory}: no such leaderboard directory")
     name = "paper_reference.json" if record["kind"] == "reported" else f"{slug(record['label'])}.json"

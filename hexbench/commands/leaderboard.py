@@ -34,8 +34,8 @@ def register(app: typer.Typer) -> None:
         for line in result.errors:
             typer.echo(f"refused {line}", err=True)
         board = result.board
-        console.print(f"{len(board.measured)} measured entries, {len(board.reported)} paper reference series "
-                      f"-> {', '.join(str(p) for p in result.written)}", markup=False, highlight=False)
+        typer.echo(f"{len(board.measured)} measured entries, {len(board.reported)} paper reference series "
+                   f"-> {', '.join(str(p) for p in result.written)}")
         if result.errors:
             raise typer.Exit(1)
 
@@ -44,23 +44,19 @@ def register(app: typer.Typer) -> None:
         result_json: Path = typer.Argument(..., help="result record written by `hexbench run`"),
         directory: Path = typer.Option(Path("leaderboard"), "--dir", help="folder holding the result records"),
         replace: bool = typer.Option(False, "--replace", help="overwrite a record of the same name"),
+        protocol: str = typer.Option("v1", help="protocol version of the leaderboard to add to"),
     ) -> None:
         """Validate RESULT.json (protocol, every seed, provenance, summary vs episodes), copy it in, rebuild."""
-        from rich.console import Console
+        from hexbench.leaderboard import RecordError, add, build
 
-        from hexbench.leaderboard import RecordError, add, build, read_record
-
-        console = Console()
         try:
-            dest = add(result_json, directory, replace=replace)
-            protocol = read_record(dest)["protocol"]
+            dest = add(result_json, directory, replace=replace, protocol=protocol)
             result = build(directory, protocol)
         except (RecordError, ValueError) as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(1) from None
         for line in result.errors:
             typer.echo(f"refused {line}", err=True)
-        console.print(f"added {dest}; rebuilt {', '.join(str(p) for p in result.written)}", markup=False,
-                      highlight=False)
+        typer.echo(f"added {dest}; rebuilt {', '.join(str(p) for p in result.written)}")
         if result.errors:
             raise typer.Exit(1)
