@@ -361,7 +361,8 @@ def _terrain_key(summary: dict | None) -> tuple[float, float]:
         return (-math.inf, -math.inf)
     hardest = summary["hardest_level_passed"]
     auc = summary["auc"]
-    return (-math.inf if hardest is None else hardest, -math.inf if auc is None else auc)
+    # AUCs are compared at 1e-9 so float round-off can never split a tie
+    return (-math.inf if hardest is None else hardest, -math.inf if auc is None else round(auc, 9))
 
 
 def rank_terrain(rows: list[Row], terrain: str) -> dict[str, int]:
@@ -385,7 +386,7 @@ def rank_overall(rows: list[Row], terrains: tuple[str, ...]) -> tuple[list[Row],
 
     def mean_auc(r: Row) -> float:
         aucs = [(r.terrain(t) or {}).get("auc") for t in terrains]
-        return sum(a if a is not None else 0.0 for a in aucs) / len(aucs) if aucs else 0.0
+        return round(sum(a if a is not None else 0.0 for a in aucs) / len(aucs), 9) if aucs else 0.0
 
     ordered = sorted(rows, key=lambda r: (mean_rank(r), -mean_auc(r), r.label))
     overall, previous, rank = {}, None, 0
