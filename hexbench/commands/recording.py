@@ -1,0 +1,168 @@
+"""Episode-log commands: `hexbench episodes`, `hexbench replay`, `hexbench verify`, `hexbench export minari`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+
+def _fail(message: str, code: int = 1) -> None:
+    typer.echo(f"error: {message}", err=True)
+    raise typer.Exit(code)
+
+
+def _episode_file(episode: str, suffix: str) -> Path:
+    """EPISODE may be a .mcap or .rrd path, or a path without suffix; return the file with `suffix`."""
+    p = Path(episode)
+    if p.suffix in (".mcap", ".rrd"):
+        p = p.with_suffix(suffix)
+    elif not p.suffix:
+        p = p.with_name(p.name + suffix)
+    else:
+        _fail(f"{episode}: expected an episode file (.mcap or .rrd)", 2)
+    if not p.is_file():
+        _fail(f"{p}: no such file", 2)
+    return p
+
+
+def _episodes_table(run_dir: Path):
+    """The run's episode index as a DataFrame with absolute file paths (episodes.parquet, else the .mcap files)."""
+    import pandas as pd
+
+    from hexbench.recording.reader import EpisodeFileError, read_episode
+
+    index = run_dir / "episodes.parquet"
+    record_dir = run_dir / "episodes"
+    if index.is_file():
+        table = pd.read_parquet(index)
+        for kind in ("mcap", "rrd"):
+            col = f"{kind}_path"
+            if col in table:
+                table[col] = [str(record_dir / p) if isinstance(p, str) and p else None for p in table[col]]
+        return table
+    files = sorted(run_dir.glob("*.mcap")) or sorted(record_dir.glob("*.mcap"))
+    rows = []
+    for f in files:
+        try:
+            log = read_episode(f, validate=False)
+        except EpisodeFileError:
+            continue
+        e, o = log.episode, log.outcome
+        rows.append({"episode_id": e.get("episode_id", f.stem), "terrain": e.get("terrain"),
+                     "level": float(e.get("level", "nan")), "index": int(e.get("index", -1)),
+                     "seed": int(e.get("seed", -1)), "success": o.get("success"), "end_reason": o.get("end_reason"),
+                     "steps": o.get("steps"), "progress_m": o.get("progress_m"), "mcap_path": str(f),
+                     "rrd_path": str(f.with_suffix(".rrd")) if f.with_suffix(".rrd").is_file() else None})
+    return pd.DataFrame(rows)
+
+
+def register(app: typer.Typer) -> None:
+    @app.command("episodes")
+    def episodes(
+        run_dir: str = typer.Argument(..., help="a run directory (with episodes.parquet) or a folder of .mcap files"),
+        terrain: str = typer.Option(None, "--terrain", help="only this terrain"),
+        level: float = typer.Option(None, "--level", help="only this level (paper units)"),
+        outcome: str = typer.Option(None, "--outcome", help="success, failure, or an end reason "
+                                                            "(fall, lateral_deviation, stalled, step_limit)"),
+        paths: bool = typer.Option(False, "--paths", help="print only the .mcap paths (for scripting)"),
+    ) -> None:
+        """List and filter the logged episodes of a run."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from hexbench.env import END_REASONS
+
+        root = Path(run_dir)
+        if not root.is_dir():
+            _fail(f"{run_dir}: no such directory", 2)
+        table = _episodes_table(root)
+        if table.empty:
+            _fail(f"{run_dir}: no episodes.parquet and no .mcap episode files", 2)
+        if terrain is not None:
+            if terrain not in set(table["terrain"]):
+                _fail(f"no episodes on terrain {terrain!r}; terrains in this run: {', '.join(sorted(set(table['terrain'])))}", 2)
+            table = table[table["terrain"] == terrain]
+        if level is not None:
+            table = table[(table["level"] - level).abs() < 1e-9]
+        if outcome is not None:
+            valid = ("success", "failure") + tuple(r for r in END_REASONS if r != "success")
+            if outcome not in valid:
+                _fail(f"unknown outcome {outcome!r}; valid: {', '.join(valid)}", 2)
+            if outcome == "success":
+                table = table[table["success"] == True]  # noqa: E712 (pandas mask)
+            elif outcome == "failure":
+                table = table[table["success"] != True]  # noqa: E712
+            else:
+                table = table[table["end_reason"] == outcome]
+        if paths:
+            for p in table.get("mcap_path", []):
+                if p:
+                    typer.echo(p)
+            return
+        out = Table(title=f"{len(table)} episodes in {run_dir}")
+        for col in ("episode", "seed", "outcome", "steps", "progress [m]", "mcap", "rrd"):
+            out.add_column(col)
+        for _, r in table.iterrows():
+            mcap, rrd = r.get("mcap_path"), r.get("rrd_path")
+            out.add_row(str(r["episode_id"]), str(r["seed"]), str(r["end_reason"]), str(r["steps"]),
+                        f"{r['progress_m']:.3f}" if r.get("progress_m") is not None else "",
+                        "yes" if isinstance(mcap, str) and Path(mcap).is_file() else "-",
+                        "yes" if isinstance(rrd, str) and Path(rrd).is_file() else "-")
+        Console().print(out)
+
+    @app.command("replay")
+    def replay(
+        episode: str = typer.Argument(..., help="an episode's .mcap or .rrd file"),
+        summary: bool = typer.Option(False, "--summary", help="print a text summary instead of opening a viewer"),
+    ) -> None:
+        """Open a logged episode in the Rerun viewer (or print a summary with --summary)."""
+        if summary:
+            from hexbench.recording.reader import EpisodeFileError, summary_text
+
+            try:
+                typer.echo(summary_text(_episode_file(episode, ".mcap")))
+            except EpisodeFileError as e:
+                _fail(str(e))
+            return
+        import shutil
+        import subprocess
+        import sys
+
+        rrd = _episode_file(episode, ".rrd")
+        exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
+        if not Path(exe).exists():
+            _fail("the Rerun viewer (`rerun`, from rerun-sdk) is not installed; use --summary for a text summary")
+        raise typer.Exit(subprocess.call([exe, str(rrd)]))
+
+    @app.command("verify")
+    def verify(episode: str = typer.Argument(..., help="an episode's .mcap file")) -> None:
+        """Re-simulate an episode from its logged metadata and check that it matches the log exactly."""
+        from hexbench.recording.verify import verify_episode
+
+        result = verify_episode(_episode_file(episode, ".mcap"))
+        if not result.ok:
+            _fail(result.message)
+        typer.echo(f"ok: {result.message}")
+
+    export = typer.Typer(help="Export logged episodes to other dataset formats.", no_args_is_help=True)
+
+    @export.command("minari")
+    def export_minari(
+        run_dir: str = typer.Argument(..., help="a run directory written by `hexbench run`"),
+        dataset_id: str = typer.Option(None, "--dataset-id", help="Minari dataset id (default hexbench/<run>-v0)"),
+    ) -> None:
+        """Write a Minari dataset (arrow format) from a run's logged episodes (optional extra `minari`)."""
+        try:
+            import minari  # noqa: F401
+        except ImportError:
+            _fail("minari is not installed; install the optional extra with: pip install 'hexbench[minari]'")
+        from hexbench.recording.minari_export import export_run
+
+        try:
+            path = export_run(Path(run_dir), dataset_id)
+        except ValueError as e:
+            _fail(str(e), 2)
+        typer.echo(f"wrote Minari dataset {path}")
+
+    app.add_typer(export, name="export")

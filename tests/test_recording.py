@@ -1,0 +1,333 @@
+"""Episode recordings: MCAP channels read back with CRC checks, .rrd checked by Rerun, identical bytes for
+the same episode, no partial files after an abort or a killed worker, and `verify` catching a tampered log."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from hexbench.cli import app
+from hexbench.env import HexapodEnv
+from hexbench.evaluate import EpisodeJob, run_episode
+from hexbench.recording import make_episode_recorder
+from hexbench.recording.mcap_episode import METRICS_SCHEMA, TOPICS
+from hexbench.recording.reader import EpisodeFileError, check_integrity, metrics, read_episode
+from hexbench.recording.rerun_episode import verify_rrd
+from hexbench.robot import JOINT_NAMES, urdf_text
+from hexbench.tasks import load_suite
+
+REPO = Path(__file__).resolve().parent.parent
+CPG = str(REPO / "baselines" / "cpg.py")
+SHORT_STEPS = 45
+META = {"protocol": "v1", "terrain": "rough", "level": 6.0, "unit": "cm", "index": 0, "seed": 7,
+        "action_mode": "cpg_residual", "controller_file": "baselines/cpg.py", "controller_sha256": "0" * 64,
+        "hexbench_version": "test"}
+
+
+def record_short_episode(out_dir: Path, episode_id: str = "rough-6cm-00", steps: int = SHORT_STEPS,
+                         terrain: str = "rough", level: float = 6.0, abort_after: int | None = None) -> dict | None:
+    """Drive the recorder like the evaluator does, with the open-loop CPG (zero residual)."""
+    env = HexapodEnv(terrain=terrain, level=level, max_steps=steps)
+    try:
+        obs, _ = env.reset(seed=7)
+        rec = make_episode_recorder(out_dir, episode_id, {**META, "episode_id": episode_id})
+        rec.on_reset(env)
+        action = np.zeros(18)
+        n = 0
+        while True:
+            obs, reward, terminated, truncated, info = env.step(action)
+            n += 1
+            rec.on_step(env, obs, action, reward, info)
+            if abort_after is not None and n == abort_after:
+                rec.abort()
+                return None
+            if terminated or truncated:
+                break
+        return rec.on_end({"steps": n, "end_reason": info["end_reason"], "success": info["end_reason"] == "success",
+                           "progress_m": info["progress_m"]})
+    finally:
+        env.close()
+
+
+@pytest.fixture(scope="module")
+def episode(tmp_path_factory):
+    out = tmp_path_factory.mktemp("rec")
+    files = record_short_episode(out)
+    return out, files
+
+
+def test_on_end_returns_relative_paths_and_hashes(episode):
+    import hashlib
+
+    out, files = episode
+    assert set(files) == {"mcap_path", "mcap_sha256", "rrd_path", "rrd_sha256"}
+    for kind in ("mcap", "rrd"):
+        path = out / files[f"{kind}_path"]
+        assert path.parent == out and path.is_file()
+        assert hashlib.sha256(path.read_bytes()).hexdigest() == files[f"{kind}_sha256"]
+    assert sorted(p.name for p in out.iterdir()) == ["rough-6cm-00.mcap", "rough-6cm-00.rrd"]  # no temporaries
+
+
+def test_every_mcap_channel_reads_back_with_crc_validation(episode):
+    from foxglove_schemas_protobuf.FrameTransforms_pb2 import FrameTransforms
+    from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
+    from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
+    from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
+    from mcap.reader import make_reader
+    from mcap_protobuf.decoder import DecoderFactory
+
+    out, files = episode
+    path = out / files["mcap_path"]
+    check_integrity(path)  # every record, chunk CRCs and the data-section CRC
+    with open(path, "rb") as f:
+        reader = make_reader(f, validate_crcs=True, decoder_factories=[DecoderFactory()])
+        summary = reader.get_summary()
+        assert {c.topic for c in summary.channels.values()} == set(TOPICS)
+        seen: dict[str, list] = {}
+        for schema, channel, message in reader.iter_messages(log_time_order=True):
+            seen.setdefault(channel.topic, []).append((schema, message))
+        assert [a.name for a in reader.iter_attachments()] == ["robot.urdf"]
+        assert next(iter(reader.iter_attachments())).data.decode() == urdf_text()
+        meta = {m.name: m.metadata for m in reader.iter_metadata()}
+    assert meta["episode"]["seed"] == "7" and meta["episode"]["episode_id"] == "rough-6cm-00"
+    assert meta["episode"]["max_steps"] == str(SHORT_STEPS)
+    assert json.loads(meta["outcome"]["steps"]) == SHORT_STEPS
+
+    # /robot_description: ROS 2 std_msgs/msg/String in CDR holding the URDF
+    (schema, msg), = seen["/robot_description"]
+    assert schema.name == "std_msgs/msg/String" and schema.encoding == "ros2msg"
+    length = int.from_bytes(msg.data[4:8], "little")
+    assert msg.data[:4] == b"\x00\x01\x00\x00" and msg.data[8:8 + length - 1].decode() == urdf_text()
+
+    # protobuf channels decode with Foxglove's classes; times are simulated time
+    dt_ns = round(1e9 / 60)
+    (_, terrain), = seen["/terrain"]
+    scene = SceneUpdate.FromString(terrain.data)
+    tri = scene.entities[0].triangles[0]
+    assert scene.entities[0].frame_id == "world" and len(tri.indices) % 3 == 0 and len(tri.points) > 100
+    joint_msgs = [JointStates.FromString(m.data) for _, m in seen["/joint_states"]]
+    assert [j.name for j in joint_msgs[0].joints] == list(JOINT_NAMES)
+    assert seen["/joint_states"][0][1].log_time == 0 and seen["/joint_states"][-1][1].log_time == SHORT_STEPS * dt_ns
+    assert joint_msgs[-1].timestamp.ToNanoseconds() == SHORT_STEPS * dt_ns
+    tf = FrameTransforms.FromString(seen["/tf"][-1][1].data)
+    assert len(tf.transforms) == 19 and tf.transforms[0].parent_frame_id == "world"
+    assert tf.transforms[0].child_frame_id == "base" and tf.transforms[1].child_frame_id == "RF_coxa"
+    pose = PoseInFrame.FromString(seen["/base_pose"][-1][1].data)
+    assert pose.pose.position.x == pytest.approx(tf.transforms[0].translation.x)
+
+    # /metrics: one JSON object per step, valid against the channel's own JSON schema
+    rows = [json.loads(m.data) for _, m in seen["/metrics"]]
+    assert len(rows) == SHORT_STEPS and [r["step"] for r in rows] == list(range(1, SHORT_STEPS + 1))
+    schema = json.loads(seen["/metrics"][0][0].data)
+    assert schema == json.loads(json.dumps(METRICS_SCHEMA))
+    for r in rows:
+        jsonschema.validate(r, schema)
+    assert len(rows[0]["a_c"]) == 18 and len(rows[0]["phases_rad"]) == 6 and len(rows[0]["foot_contacts"]) == 6
+    assert set(rows[0]["reward_terms"]) == {"distance", "heading", "fall", "tilt", "height", "step_limit"}
+    assert rows[-1]["end_reason"] == "step_limit" and rows[0]["end_reason"] is None
+    assert any(any(r["foot_contacts"]) for r in rows)
+
+
+def test_logged_numbers_match_the_simulation(episode):
+    """The log holds what the env produced (to the documented precision), not something else."""
+    out, files = episode
+    env = HexapodEnv(terrain="rough", level=6.0, max_steps=SHORT_STEPS)
+    env.reset(seed=7)
+    expected = []
+    for _ in range(SHORT_STEPS):
+        _, reward, _, _, info = env.step(np.zeros(18))
+        expected.append((reward, info["a_c"].copy(), info["progress_m"]))
+    env.close()
+    rows = metrics(out / files["mcap_path"])
+    for row, (reward, a_c, progress) in zip(rows, expected):
+        assert row["reward"] == pytest.approx(reward, rel=1e-4, abs=1e-9)
+        assert np.allclose(row["a_c"], a_c, atol=5e-4)
+        assert row["progress_m"] == pytest.approx(progress, rel=1e-4, abs=1e-6)
+
+
+def test_rrd_passes_rerun_verify_and_carries_the_episode_id(episode):
+    out, files = episode
+    path = out / files["rrd_path"]
+    verify_rrd(path)  # `rerun rrd verify`
+    exe = Path(sys.executable).with_name("rerun")
+    printed = subprocess.run([str(exe), "rrd", "print", str(path)], capture_output=True, text=True, timeout=60,
+                             env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
+    assert '"rough-6cm-00"' in printed  # recording id
+    for entity in ("/world/terrain", "/world/base", "/joints/RF_hip", "/plots/reward", "/jethexa/visual_geometries"):
+        assert entity in printed
+
+
+def test_same_episode_twice_gives_identical_mcap_bytes(tmp_path, episode):
+    out, files = episode
+    again = record_short_episode(tmp_path)
+    assert again["mcap_sha256"] == files["mcap_sha256"]
+    assert (tmp_path / again["mcap_path"]).read_bytes() == (out / files["mcap_path"]).read_bytes()
+
+
+def test_abort_mid_episode_leaves_no_file(tmp_path):
+    assert record_short_episode(tmp_path, abort_after=10) is None
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_failure_while_writing_leaves_no_partial_file(tmp_path, monkeypatch):
+    import hexbench.recording.recorder as recorder
+
+    def broken_rrd(path, *args, **kwargs):
+        Path(path).write_bytes(b"half a file")
+        raise OSError("disk full")
+
+    monkeypatch.setattr(recorder, "write_episode_rrd", broken_rrd)
+    with pytest.raises(OSError, match="disk full"):
+        record_short_episode(tmp_path, steps=5)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_killed_worker_leaves_finished_episodes_readable_and_no_partial_file(tmp_path):
+    """A process records one episode, starts a second and is SIGKILLed in the middle of it."""
+    script = textwrap.dedent(f"""
+        import sys, numpy as np
+        from pathlib import Path
+        sys.path.insert(0, {str(REPO / 'tests')!r})
+        from test_recording import record_short_episode, HexapodEnv, make_episode_recorder, META
+        out = Path({str(tmp_path)!r})
+        record_short_episode(out, "first", steps=20)
+        env = HexapodEnv(terrain="flat", max_steps=100000)
+        obs, _ = env.reset(seed=1)
+        rec = make_episode_recorder(out, "second", META)
+        rec.on_reset(env)
+        for k in range(100000):
+            obs, r, te, tr, info = env.step(np.zeros(18))
+            rec.on_step(env, obs, np.zeros(18), r, info)
+            if k == 30:
+                print("started", flush=True)
+    """)
+    proc = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True, cwd=REPO)
+    try:
+        assert proc.stdout.readline().strip() == "started"
+        time.sleep(0.2)
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["first.mcap", "first.rrd"]
+    check_integrity(tmp_path / "first.mcap")
+    verify_rrd(tmp_path / "first.rrd")
+
+
+def _short_protocol_episode(out: Path) -> Path:
+    task = load_suite("v1").task("stairs", 2.0)
+    row = run_episode(EpisodeJob(CPG, task, 0, task.seeds(1)[0], record_dir=str(out), max_steps=40))
+    return out / row["mcap_path"]
+
+
+def _rewrite_with_changed_metric(src: Path, dst: Path, step: int) -> None:
+    """A tampered copy: valid MCAP (all CRCs right), one /metrics value changed."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        w = Writer(g)
+        w.start()
+        schema_ids = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+        channel_ids = {cid: w.register_channel(c.topic, c.message_encoding, schema_ids[c.schema_id])
+                       for cid, c in summary.channels.items()}
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        for _, channel, msg in reader.iter_messages(log_time_order=True):
+            data = msg.data
+            if channel.topic == "/metrics":
+                row = json.loads(data)
+                if row["step"] == step:
+                    row["reward"] += 0.5
+                    data = json.dumps(row).encode()
+            w.add_message(channel_ids[msg.channel_id], msg.log_time, data, msg.publish_time)
+        w.finish()
+
+
+def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
+    path = _short_protocol_episode(tmp_path / "run")
+    runner = CliRunner()
+    ok = runner.invoke(app, ["verify", str(path)])
+    assert ok.exit_code == 0, ok.output
+    assert "match the re-simulation exactly" in ok.output
+
+    tampered = tmp_path / "tampered.mcap"
+    _rewrite_with_changed_metric(path, tampered, step=17)
+    check_integrity(tampered)  # a consistent file: only re-simulation can tell
+    bad = runner.invoke(app, ["verify", str(tampered)])
+    assert bad.exit_code == 1
+    assert "/metrics message 16" in bad.output and "differs from the re-simulation" in bad.output
+
+    flipped = tmp_path / "flipped.mcap"
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF  # inside the compressed chunk
+    flipped.write_bytes(bytes(data))
+    with pytest.raises(EpisodeFileError):
+        read_episode(flipped)
+    res = runner.invoke(app, ["verify", str(flipped)])
+    assert res.exit_code == 1 and "corrupt MCAP file" in res.output
+
+
+def test_episode_commands(tmp_path):
+    from hexbench.evaluate import evaluate
+
+    out = tmp_path / "run"
+    result = evaluate(CPG, [load_suite("v1").task("stairs", 2.0)], out, episodes=1, workers=1, progress=False)
+    assert result.error is None
+    runner = CliRunner()
+    listed = runner.invoke(app, ["episodes", str(out)])
+    assert listed.exit_code == 0 and "stairs-2cm-00" in listed.output
+    paths = runner.invoke(app, ["episodes", str(out), "--outcome", "success", "--paths"])
+    assert paths.exit_code == 0
+    none = runner.invoke(app, ["episodes", str(out), "--outcome", "fall", "--paths"])
+    assert none.exit_code == 0 and none.output.strip() == ""
+    bad = runner.invoke(app, ["episodes", str(out), "--outcome", "crashed"])
+    assert bad.exit_code == 2 and "valid: success, failure" in bad.output
+    mcap = out / "episodes" / "stairs-2cm-00.mcap"
+    summary = runner.invoke(app, ["replay", str(mcap), "--summary"])
+    assert summary.exit_code == 0, summary.output
+    assert "stairs level 2.0" in summary.output and "foot contact" in summary.output
+    missing = runner.invoke(app, ["replay", str(tmp_path / "nope.mcap"), "--summary"])
+    assert missing.exit_code == 2 and "no such file" in missing.output
+
+
+def test_export_minari_without_minari_says_how_to_install(tmp_path):
+    try:
+        import minari  # noqa: F401
+        pytest.skip("minari is installed")
+    except ImportError:
+        pass
+    res = CliRunner().invoke(app, ["export", "minari", str(tmp_path)])
+    assert res.exit_code == 1 and "pip install 'hexbench[minari]'" in res.output
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_joint_states_template_encoding_matches_protobuf():
+    """The vectorised encoder gives exactly what the official classes decode, zeros included."""
+    from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
+
+    from hexbench.recording.mcap_episode import _joint_states_encoder
+    from hexbench.recording.protobuf_rows import timestamp_field
+
+    rng = np.random.default_rng(0)
+    values = rng.normal(size=(5, 54))
+    values[2, :5] = 0.0
+    rows = _joint_states_encoder(JOINT_NAMES).encode(values)
+    for i, row in enumerate(rows):
+        msg = JointStates.FromString(timestamp_field(1_234_567_891 * i) + row.tobytes())
+        assert msg.timestamp.ToNanoseconds() == 1_234_567_891 * i
+        got = [(j.position, j.velocity, j.effort) for j in msg.joints]
+        assert np.array_equal(np.array(got).reshape(-1), values[i])
+        assert [j.name for j in msg.joints] == list(JOINT_NAMES)
