@@ -86,7 +86,6 @@ def test_bad_terrain_and_bad_override_give_one_line_and_no_files(tmp_path):
     assert not out.exists()
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ppo", "hrl", "sac", "td3", "sac_cpg", "td3_cpg"])
 def test_every_baseline_trains_through_the_cli(tmp_path, method):
     out = tmp_path / method
