@@ -1,29 +1,31 @@
 """Environment step cost against raw physics stepping of the same world (issue 2).
 
-For each terrain, one `HexapodEnv` (cpg_residual mode, a_r = 0, default observation noise:
-the open-loop CPG walking) is reset with a fixed seed and stepped `--steps` times, timing
-every `env.step`. Then the *same* world is rebuilt (`reset` with the same seed gives the same
-terrain instance and start pose) and the joint targets the env actually sent are replayed,
-timing only the `substeps_per_control` calls of `pybullet.stepSimulation` per control step
-(the motor command that moves the robot is issued outside the timer). The replay follows the
-same trajectory as the env run (checked: the final base positions must agree), so both
-timings cover identical physics: same contacts, same solver work.
+For each terrain, two copies of the same world are built: a `HexapodEnv` (cpg_residual mode,
+a_r = 0, default observation noise: the open-loop CPG walking) and a second env of the same
+config reset with the same seed, whose physics client serves as the raw world. They advance in
+lockstep: every control step, `env.step` is timed on the first; then the joint targets it sent
+are commanded on the second (outside the timer) and only its `substeps_per_control` calls of
+`pybullet.stepSimulation` are timed. Both worlds follow the same trajectory (checked: the final
+base positions must agree), so both timings cover identical physics: same contacts, same solver
+work. Interleaving step by step means that load from other processes on a shared machine hits
+both sides alike.
 
     ratio = (env time per step) / (raw stepSimulation time per control step)
 
 The issue's target is ratio <= 1.15. Times are CPU time of this process
-(`time.process_time_ns`; PyBullet DIRECT runs in this thread), so other processes on a
-shared machine do not inflate them; each terrain is measured `--repeats` times, alternating
-env and raw, and the median of each is used.
+(`time.process_time_ns`; PyBullet DIRECT runs in this thread); each terrain is measured
+`--repeats` times and the median of each side is used.
 
     python bench/env_speed.py                 # all terrains, 1000 steps, 3 repeats
     python bench/env_speed.py --terrain rough --steps 500 --json out.json
+    python bench/env_speed.py --breakdown     # also: where the env's time per step goes
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import sys
@@ -63,62 +65,91 @@ class Measurement:
         return 1e6 / self.raw_us_per_step
 
 
-def time_env(env: HexapodEnv, steps: int) -> tuple[int, list[np.ndarray], np.ndarray]:
-    """Step the env with a_r = 0; return (CPU ns, joint targets sent per step, final base xyz)."""
+def lockstep(env: HexapodEnv, raw: HexapodEnv, steps: int) -> tuple[int, int]:
+    """Run `steps` control steps on both worlds; return (env CPU ns, raw stepSimulation CPU ns)."""
     env.reset(seed=SEED)
+    raw.reset(seed=SEED)
+    sim = raw.sim
+    client, robot, joints = sim.client, sim.robot_id, sim.joint_indices
+    substeps = sim.physics.substeps_per_control
+    forces = [sim.robot_spec.servo_stall_torque_nm] * len(joints)
+    kp = [sim.robot_spec.servo_position_gain] * len(joints)
+    kd = [sim.robot_spec.servo_velocity_gain] * len(joints)
+    step_simulation = p.stepSimulation
     action = np.zeros(env.action_space.shape, dtype=np.float32)
-    sent: list[np.ndarray] = []
-    total_ns = 0
-    for _ in range(steps):
+    env_ns = raw_ns = 0
+    for k in range(steps):
         t0 = time.process_time_ns()
         _, _, terminated, truncated, info = env.step(action)
-        total_ns += time.process_time_ns() - t0
-        sent.append(np.array(info["a_t"]))
+        env_ns += time.process_time_ns() - t0
         if terminated or truncated:
-            raise RuntimeError(f"episode ended early ({info['end_reason']}) at step {len(sent)}; use fewer --steps")
-    return total_ns, sent, env.sim.state().base_pos_m
-
-
-def time_raw(env: HexapodEnv, targets: list[np.ndarray]) -> tuple[int, np.ndarray]:
-    """Rebuild the same world and replay `targets`, timing only stepSimulation; (CPU ns, final base xyz)."""
-    env.reset(seed=SEED)
-    sim = env.sim
-    client, robot = sim.client, sim.robot_id
-    substeps = sim.physics.substeps_per_control
-    forces = [sim.robot_spec.servo_stall_torque_nm] * len(sim.joint_indices)
-    kp = [sim.robot_spec.servo_position_gain] * len(sim.joint_indices)
-    kd = [sim.robot_spec.servo_velocity_gain] * len(sim.joint_indices)
-    step_simulation = p.stepSimulation
-    total_ns = 0
-    for target in targets:
-        p.setJointMotorControlArray(robot, sim.joint_indices, p.POSITION_CONTROL, targetPositions=target.tolist(),
+            raise RuntimeError(f"episode ended early ({info['end_reason']}) at step {k + 1}; use fewer --steps")
+        p.setJointMotorControlArray(robot, joints, p.POSITION_CONTROL, targetPositions=info["a_t"].tolist(),
                                     forces=forces, positionGains=kp, velocityGains=kd, physicsClientId=client)
         t0 = time.process_time_ns()
         for _ in range(substeps):
             step_simulation(physicsClientId=client)
-        total_ns += time.process_time_ns() - t0
-    pos, _ = p.getBasePositionAndOrientation(robot, physicsClientId=client)
-    return total_ns, np.array(pos)
+        raw_ns += time.process_time_ns() - t0
+    env_final = env.sim.state().base_pos_m
+    raw_final = np.array(p.getBasePositionAndOrientation(robot, physicsClientId=client)[0])
+    gap_m = float(np.max(np.abs(env_final - raw_final)))
+    if gap_m > 1e-9:
+        raise RuntimeError(f"raw world diverged from the env run by {gap_m:.3g} m; "
+                           "the two timings would not cover the same physics")
+    return env_ns, raw_ns
 
 
 def measure(terrain: str, steps: int, repeats: int) -> Measurement:
     level = BENCH_LEVELS[terrain]
-    env = HexapodEnv(EnvConfig(terrain=terrain, level=level, action_mode="cpg_residual"))
+    config = EnvConfig(terrain=terrain, level=level, action_mode="cpg_residual")
+    env, raw = HexapodEnv(config), HexapodEnv(config)
     try:
-        env_ns, raw_ns = [], []
-        for _ in range(repeats):
-            e_ns, targets, env_final = time_env(env, steps)
-            r_ns, raw_final = time_raw(env, targets)
-            gap_m = float(np.max(np.abs(env_final - raw_final)))
-            if gap_m > 1e-6:
-                raise RuntimeError(f"{terrain}: raw replay diverged from the env run by {gap_m:.3g} m; "
-                                   "the two timings would not cover the same physics")
-            env_ns.append(e_ns)
-            raw_ns.append(r_ns)
+        runs = [lockstep(env, raw, steps) for _ in range(repeats)]
     finally:
         env.close()
-    return Measurement(terrain, level, steps, statistics.median(env_ns) / steps / 1e3,
-                       statistics.median(raw_ns) / steps / 1e3)
+        raw.close()
+    return Measurement(terrain, level, steps, statistics.median(r[0] for r in runs) / steps / 1e3,
+                       statistics.median(r[1] for r in runs) / steps / 1e3)
+
+
+BREAKDOWN_PARTS: tuple[tuple[str, str, str], ...] = (
+    # (label, object attribute path on the env, method name)
+    ("CPG step", "cpg", "step"),
+    ("send targets", "sim", "send_targets"),
+    ("physics (stepSimulation x substeps)", "sim", "step_physics"),
+    ("read state", "sim", "state"),
+    ("observation", "", "_observe"),
+)
+
+
+def breakdown(terrain: str, steps: int) -> dict[str, float]:
+    """CPU microseconds per env step spent in each part of `HexapodEnv.step` (wrapping its calls)."""
+    env = HexapodEnv(EnvConfig(terrain=terrain, level=BENCH_LEVELS[terrain], action_mode="cpg_residual"))
+    spent = {label: 0 for label, _, _ in BREAKDOWN_PARTS}
+    try:
+        env.reset(seed=SEED)
+        for label, owner_name, method in BREAKDOWN_PARTS:
+            owner = getattr(env, owner_name) if owner_name else env
+            inner = getattr(owner, method)
+
+            def timed(*args, _inner=inner, _label=label, **kwargs):
+                t0 = time.process_time_ns()
+                out = _inner(*args, **kwargs)
+                spent[_label] += time.process_time_ns() - t0
+                return out
+
+            setattr(owner, method, timed)  # instance attribute shadows the method
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        t0 = time.process_time_ns()
+        for _ in range(steps):
+            env.step(action)
+        total = time.process_time_ns() - t0
+    finally:
+        env.close()
+    out = {label: ns / steps / 1e3 for label, ns in spent.items()}
+    out["rest of step (checks, episode rules, reward, info)"] = total / steps / 1e3 - sum(out.values())
+    out["total"] = total / steps / 1e3
+    return out
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -128,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=1000, help="control steps per run (default 1000)")
     parser.add_argument("--repeats", type=int, default=3, help="runs per terrain; medians are reported (default 3)")
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON to PATH")
+    parser.add_argument("--breakdown", action="store_true", help="also show where the env step's time goes")
     args = parser.parse_args(argv)
     if args.steps < 1 or args.repeats < 1:
         parser.error("--steps and --repeats must be at least 1")
@@ -152,13 +184,26 @@ def main(argv: list[str] | None = None) -> int:
                       f"{m.env_us_per_step:.0f}", f"{m.raw_us_per_step:.0f}", f"{m.ratio:.3f}")
     console.print(table)
     worst = max(results, key=lambda m: m.ratio)
-    console.print(f"worst ratio {worst.ratio:.3f} ({worst.terrain}); target <= 1.15")
+    load = os.getloadavg()[0]
+    console.print(f"worst ratio {worst.ratio:.3f} ({worst.terrain}); target <= 1.15; "
+                  f"1-min load average {load:.1f} on {os.cpu_count()} CPUs (contention inflates the Python share)")
+    parts = {t: breakdown(t, args.steps) for t in terrains} if args.breakdown else {}
+    if parts:
+        split = Table(title="env step breakdown, CPU us per step (a_r = 0)")
+        split.add_column("part")
+        for t in terrains:
+            split.add_column(t, justify="right")
+        for label in next(iter(parts.values())):
+            split.add_row(label, *(f"{parts[t][label]:.0f}" for t in terrains))
+        console.print(split)
     if args.json:
         payload = {
             "python": sys.version.split()[0], "machine": platform.machine(), "processor": platform.processor(),
-            "steps": args.steps, "repeats": args.repeats, "seed": SEED,
+            "steps": args.steps, "repeats": args.repeats, "seed": SEED, "cpus": os.cpu_count(),
+            "load_average_1min": load,
             "results": [{"terrain": m.terrain, "level": m.level, "env_us_per_step": m.env_us_per_step,
                          "raw_us_per_step": m.raw_us_per_step, "ratio": m.ratio} for m in results],
+            "breakdown_us_per_step": parts,
         }
         with open(args.json, "w") as f:
             json.dump(payload, f, indent=2)
