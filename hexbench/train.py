@@ -285,6 +285,9 @@ def make_callback(settings: TrainSettings, run: dict, model_saver, progress=None
             }
 
         def write_csv(self, curriculum: list[dict] | None = None) -> None:
+            if self.num_timesteps == getattr(self, "last_csv_steps", None):
+                return  # a checkpoint right after a CSV row: no duplicate rows
+            self.last_csv_steps = self.num_timesteps
             curriculum = curriculum or self.curriculum()
             path = settings.run_dir / "progress.csv"
             new = not path.exists()

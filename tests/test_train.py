@@ -165,3 +165,17 @@ def test_epsilon_sweep_and_learning_curves(tmp_path):
     assert (png.parent / "ppo_cpg-stairs-seed0.csv").is_file()
     bad = run_cli("curves", tmp_path / "nowhere", "--out", png)
     assert bad.exit_code == 2 and "no progress CSV" in bad.output
+
+
+def test_resume_restores_each_envs_curriculum_level(tmp_path):
+    out = tmp_path / "run"
+    assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
+    run_path = out / "run.json"
+    run = json.loads(run_path.read_text())
+    run["curriculum"] = [{"level": 8.0, "successes": 3}]  # as if the run had climbed to 8 cm
+    run_path.write_text(json.dumps(run))
+    assert train_tiny("ppo_cpg", out, steps=128).exit_code == 0
+    run = json.loads(run_path.read_text())
+    assert run["curriculum"] == [{"level": 8.0, "successes": 3}]
+    last_row = (out / "progress.csv").read_text().splitlines()[-1].split(",")
+    assert last_row[0] == "128" and last_row[6] == "8"
