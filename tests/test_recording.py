@@ -331,3 +331,21 @@ def test_joint_states_template_encoding_matches_protobuf():
         got = [(j.position, j.velocity, j.effort) for j in msg.joints]
         assert np.array_equal(np.array(got).reshape(-1), values[i])
         assert [j.name for j in msg.joints] == list(JOINT_NAMES)
+
+
+def test_export_minari_replays_logged_episodes(tmp_path):
+    minari = pytest.importorskip("minari")
+    run = tmp_path / "cpg-run"
+    task = load_suite("v1").task("stairs", 2.0)
+    for index, seed in enumerate(task.seeds(2)):
+        run_episode(EpisodeJob(CPG, task, index, seed, record_dir=str(run / "episodes"), max_steps=30))
+    res = CliRunner().invoke(app, ["export", "minari", str(run)])
+    assert res.exit_code == 0, res.output
+    os.environ["MINARI_DATASETS_PATH"] = str(run / "minari")
+    try:
+        ds = minari.load_dataset("hexbench/cpg-run-stairs-2cm-v0")
+        assert ds.total_episodes == 2 and ds.total_steps == 60
+        first = next(ds.iterate_episodes())
+        assert first.observations.shape == (31, 62) and first.actions.shape == (30, 18)
+    finally:
+        os.environ.pop("MINARI_DATASETS_PATH", None)

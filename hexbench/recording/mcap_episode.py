@@ -149,6 +149,21 @@ def _register_protobuf(writer, cache: dict, message_class) -> int:
 
 
 # ------------------------------------------------------------------------------- writing
+_TIMESTAMP_CACHE: dict[int, bytes] = {}
+
+
+def _timestamp_fields(time_ns: np.ndarray) -> list[bytes]:
+    """Timestamp fields of the state rows; the control period is fixed, so they repeat across episodes."""
+    cache = _TIMESTAMP_CACHE
+    out = []
+    for ti in time_ns.tolist():
+        field = cache.get(ti)
+        if field is None:
+            field = cache[ti] = timestamp_field(ti)
+        out.append(field)
+    return out
+
+
 def _rows(n_rows: int, every: int) -> list[int]:
     """State rows logged at a reduced rate: 0, every, 2 every, ..., and always the last."""
     return sorted(set(range(0, n_rows, max(1, every))) | {n_rows - 1})
@@ -198,7 +213,7 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
     })
 
     t = ep.time_ns.tolist()
-    ts_fields = [timestamp_field(ti) for ti in t]
+    ts_fields = _timestamp_fields(ep.time_ns)
     writer.add_message(ch["/robot_description"], 0, _ros2_string_cdr(urdf), 0)
     writer.add_message(ch["/terrain"], 0, _terrain_scene(*mesh), 0)
 

@@ -1,0 +1,196 @@
+"""What episode recording costs: evaluation time with and without recording, and bytes per episode (issue 4).
+
+The open-loop CPG baseline (baselines/cpg.py) is evaluated with `hexbench.evaluate.evaluate`
+on a task selection twice per repeat, once with `record=False` and once with `record=True`
+(alternating, in this process: workers = 1), and
+
+    time ratio = (evaluation time with recording) / (evaluation time without)
+
+is reported from the medians over the repeats, both as CPU time of this process
+(`time.process_time`, which also counts Rerun's writer threads and is not inflated by other
+processes on a shared machine) and as wall time. The recorder's own time is also measured
+directly (each on_reset / on_step / on_end call timed) as a fraction of the episode time.
+Bytes per episode (.mcap, .rrd, both) come from the recorded run's files. The issue's targets
+are a time ratio <= 1.05 and <= 1 MB per episode for both files together.
+
+    python bench/record_overhead.py                              # one level per terrain, 2 episodes each
+    python bench/record_overhead.py --full --repeats 1           # the whole protocol v1 (long)
+    python bench/record_overhead.py --terrain stairs --levels 2 --episodes 3 --json out.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+CPG = REPO / "baselines" / "cpg.py"
+DEFAULT_LEVELS = {"rough": 6.0, "slopes": 10.0, "stairs": 5.0}  # mid paper levels the CPG mostly walks
+
+
+class _TimedRecorder:
+    """Wraps a recorder and adds the time spent in its calls to a shared counter."""
+
+    def __init__(self, inner, clock: dict):
+        self._inner, self._clock = inner, clock
+
+    def _timed(self, name, *args):
+        t0 = time.perf_counter()
+        try:
+            return getattr(self._inner, name)(*args)
+        finally:
+            self._clock["recorder_s"] += time.perf_counter() - t0
+
+    def on_reset(self, env):
+        return self._timed("on_reset", env)
+
+    def on_step(self, env, obs, action, reward, info):
+        return self._timed("on_step", env, obs, action, reward, info)
+
+    def on_end(self, row):
+        return self._timed("on_end", row)
+
+    def abort(self):
+        return self._inner.abort()
+
+
+def _run(tasks, episodes: int | None, record: bool, clock: dict) -> dict:
+    from hexbench.evaluate import evaluate
+
+    with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
+        out = Path(tmp) / "run"
+        wall0, cpu0 = time.perf_counter(), time.process_time()
+        result = evaluate(str(CPG), tasks, out, episodes=episodes, workers=1, record=record, progress=False)
+        wall, cpu = time.perf_counter() - wall0, time.process_time() - cpu0
+        if result.error:
+            raise SystemExit(f"error: {result.error}")
+        sizes = []
+        if record:
+            for mcap in sorted((out / "episodes").glob("*.mcap")):
+                rrd = mcap.with_suffix(".rrd")
+                sizes.append({"episode": mcap.stem, "mcap_bytes": mcap.stat().st_size, "rrd_bytes": rrd.stat().st_size})
+        steps = {f"{e['terrain']}-{e['level']:g}-{e['index']:02d}": e["steps"] for e in result.record["episodes"]}
+    return {"wall_s": wall, "cpu_s": cpu, "sizes": sizes, "steps": steps}
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--terrain", action="append", choices=sorted(DEFAULT_LEVELS), help="terrain (repeatable)")
+    ap.add_argument("--levels", help="comma-separated levels (default: one mid level per terrain)")
+    ap.add_argument("--episodes", type=int, default=2, help="episodes per level (default 2)")
+    ap.add_argument("--full", action="store_true", help="the whole protocol v1 (all levels, 20 episodes each)")
+    ap.add_argument("--repeats", type=int, default=2, help="runs of each configuration (default 2)")
+    ap.add_argument("--json", help="also write the results to this JSON file")
+    args = ap.parse_args(argv)
+
+    import hexbench.recording as recording
+    from hexbench.tasks import load_suite
+
+    suite = load_suite("v1")
+    if args.full:
+        tasks, episodes = list(suite.tasks), None
+    else:
+        terrains = args.terrain or sorted(DEFAULT_LEVELS)
+        if args.levels:
+            levels = [float(v) for v in args.levels.split(",")]
+            tasks = suite.select(terrains, levels)
+        else:
+            tasks = [suite.task(t, DEFAULT_LEVELS[t]) for t in terrains]
+        episodes = args.episodes
+
+    # Warm-up: a worker pays once for importing Rerun, parsing the URDF and building lookup
+    # tables (~1 s); it is reported separately and kept out of the per-episode comparison.
+    t0 = time.process_time()
+    _warm_up()
+    warm_up_cpu_s = time.process_time() - t0
+
+    clock = {"recorder_s": 0.0}
+    original = recording.make_episode_recorder
+    recording.make_episode_recorder = lambda *a, **k: _TimedRecorder(original(*a, **k), clock)
+    try:
+        plain, recorded = [], []
+        for _ in range(args.repeats):
+            plain.append(_run(tasks, episodes, False, clock))
+            clock["recorder_s"] = 0.0
+            recorded.append(_run(tasks, episodes, True, clock))
+            recorded[-1]["recorder_s"] = clock["recorder_s"]
+    finally:
+        recording.make_episode_recorder = original
+
+    med = statistics.median
+    cpu_plain, cpu_rec = med(r["cpu_s"] for r in plain), med(r["cpu_s"] for r in recorded)
+    wall_plain, wall_rec = med(r["wall_s"] for r in plain), med(r["wall_s"] for r in recorded)
+    rec_s = med(r["recorder_s"] for r in recorded)
+    sizes = recorded[-1]["sizes"]
+    steps = recorded[-1]["steps"]
+    totals = [s["mcap_bytes"] + s["rrd_bytes"] for s in sizes]
+    n_steps = sum(steps.values())
+    result = {
+        "machine": {"platform": platform.platform(), "python": platform.python_version()},
+        "tasks": [t.name for t in tasks], "episodes": len(sizes), "control_steps": n_steps,
+        "repeats": args.repeats,
+        "cpu_s": {"no_record": cpu_plain, "record": cpu_rec, "ratio": cpu_rec / cpu_plain},
+        "wall_s": {"no_record": wall_plain, "record": wall_rec, "ratio": wall_rec / wall_plain},
+        "recorder_s": rec_s, "recorder_fraction_of_plain_wall": rec_s / wall_plain,
+        "one_time_warm_up_cpu_s": warm_up_cpu_s,
+        "bytes_per_episode": {
+            "mcap_mean": statistics.mean(s["mcap_bytes"] for s in sizes),
+            "rrd_mean": statistics.mean(s["rrd_bytes"] for s in sizes),
+            "total_mean": statistics.mean(totals), "total_max": max(totals),
+            "total_per_1000_steps": 1000 * sum(totals) / n_steps,
+        },
+        "per_episode": [{**s, "steps": steps.get(_row_key(s["episode"]), None)} for s in sizes],
+    }
+    b = result["bytes_per_episode"]
+    print(f"tasks {', '.join(result['tasks'])}; {len(sizes)} episodes, {n_steps} control steps, {args.repeats} repeats")
+    print(f"CPU time   no record {cpu_plain:8.2f} s   record {cpu_rec:8.2f} s   ratio {cpu_rec / cpu_plain:.3f}")
+    print(f"wall time  no record {wall_plain:8.2f} s   record {wall_rec:8.2f} s   ratio {wall_rec / wall_plain:.3f}")
+    print(f"recorder calls {rec_s:.2f} s = {100 * rec_s / wall_plain:.1f}% of the unrecorded wall time; "
+          f"one-time warm-up per worker {warm_up_cpu_s:.2f} s CPU (not included)")
+    print(f"bytes/episode  mcap {b['mcap_mean'] / 1e3:.0f} kB  rrd {b['rrd_mean'] / 1e3:.0f} kB  "
+          f"both: mean {b['total_mean'] / 1e3:.0f} kB, max {b['total_max'] / 1e3:.0f} kB "
+          f"({b['total_per_1000_steps'] / 1e3:.0f} kB per 1000 steps)")
+    for e in result["per_episode"]:
+        print(f"  {e['episode']:<16} {e['steps'] or '?':>5} steps  mcap {e['mcap_bytes'] / 1e3:6.0f} kB  "
+              f"rrd {e['rrd_bytes'] / 1e3:6.0f} kB")
+    if args.json:
+        Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
+    return 0
+
+
+def _warm_up() -> None:
+    """Record one short episode so imports and per-process caches are in place before timing."""
+    import numpy as np
+
+    from hexbench.env import HexapodEnv
+    from hexbench.recording import make_episode_recorder
+
+    env = HexapodEnv(terrain="rough", level=6.0, max_steps=20)
+    with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
+        obs, _ = env.reset(seed=0)
+        rec = make_episode_recorder(Path(tmp), "warm-up", {})
+        rec.on_reset(env)
+        while True:
+            obs, reward, terminated, truncated, info = env.step(np.zeros(18))
+            rec.on_step(env, obs, np.zeros(18), reward, info)
+            if terminated or truncated:
+                break
+        rec.on_end({"steps": 20})
+    env.close()
+
+
+def _row_key(episode_id: str) -> str:
+    """'stairs-5cm-00' -> 'stairs-5-00' (the key used for steps)."""
+    terrain, level_unit, index = episode_id.rsplit("-", 2)
+    level = level_unit.rstrip("cmdeg")
+    return f"{terrain}-{float(level):g}-{index}"
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,97 @@
+"""`hexbench export minari`: a run's logged episodes as Minari datasets (arrow format), one per task.
+
+Minari needs every step's observation, and the observation a controller saw includes the
+seeded observation noise, which the logs do not store. So each logged episode is replayed
+exactly from its metadata (task, seed, controller file, step limit) in the task's environment,
+and the replay is checked against the log (same number of steps, same per-step rewards to the
+logged precision) before it is kept. Episodes are handed to `minari.create_dataset_from_buffers`
+(Minari's DataCollector would need jax); actions are stored as float32 (the action space's dtype).
+Datasets go to RUN/minari/ (MINARI_DATASETS_PATH is pointed there while writing), with ids
+`hexbench/<run>-<terrain>-<level><unit>-v0`.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+from collections import defaultdict
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from hexbench.recording.reader import metrics, read_episode
+
+
+def _episode_files(run_dir: Path) -> list[Path]:
+    files = sorted((run_dir / "episodes").glob("*.mcap")) or sorted(run_dir.glob("*.mcap"))
+    if not files:
+        raise ValueError(f"{run_dir}: no logged episodes (.mcap files) found; run `hexbench run` with recording on")
+    return files
+
+
+def export_run(run_dir: Path, dataset_id: str | None = None) -> Path:
+    import minari
+    from minari.data_collector.episode_buffer import EpisodeBuffer
+
+    from hexbench.controller import check_action, file_sha256, make_controller
+    from hexbench.env import HexapodEnv
+    from hexbench.tasks import load_suite
+
+    run_dir = Path(run_dir)
+    groups: dict[tuple, list] = defaultdict(list)
+    for f in _episode_files(run_dir):
+        e = read_episode(f).episode
+        controller = Path(e["controller_file"])
+        if not controller.is_file() or file_sha256(controller) != e["controller_sha256"]:
+            raise ValueError(f"{f}: controller file {e['controller_file']} is missing or changed since recording")
+        groups[(e["protocol"], e["terrain"], float(e["level"]), e["controller_file"], e["action_mode"])].append((f, e))
+    run_name = re.sub(r"[^A-Za-z0-9]+", "-", run_dir.resolve().name).strip("-").lower() or "run"
+    out_root = run_dir / "minari"
+    previous = os.environ.get("MINARI_DATASETS_PATH")
+    os.environ["MINARI_DATASETS_PATH"] = str(out_root.resolve())
+    try:
+        for (protocol, terrain, level, controller_file, mode), episodes in sorted(groups.items()):
+            task = load_suite(protocol).task(terrain, level)
+            max_steps = int(episodes[0][1].get("max_steps", task.max_steps))
+            env = HexapodEnv(replace(task.env_config(mode), max_steps=max_steps))
+            ctrl = make_controller(controller_file, task)
+            dim = env.action_space.shape[0]
+            buffers = []
+            for f, e in sorted(episodes, key=lambda x: int(x[1]["index"])):
+                seed = int(e["seed"])
+                obs, _ = env.reset(seed=seed)
+                ctrl.reset(seed)
+                observations, actions, rewards, terminations, truncations = [obs], [], [], [], []
+                while True:
+                    action = check_action(ctrl.act(obs.copy()), dim, controller_file)
+                    obs, reward, terminated, truncated, _ = env.step(action)
+                    observations.append(obs)
+                    actions.append(action.astype(np.float32))
+                    rewards.append(float(reward))
+                    terminations.append(bool(terminated))
+                    truncations.append(bool(truncated))
+                    if terminated or truncated:
+                        break
+                logged = [m["reward"] for m in metrics(f)]
+                if len(logged) != len(rewards) or any(float(f"{r:.5g}") != lr for r, lr in zip(rewards, logged)):
+                    raise ValueError(f"{f}: the replayed episode differs from its log; not exported")
+                buffers.append(EpisodeBuffer(id=len(buffers), seed=seed, observations=np.array(observations),
+                                             actions=np.array(actions), rewards=rewards, terminations=terminations,
+                                             truncations=truncations))
+            env.close()
+            ds_id = dataset_id or f"hexbench/{run_name}-{task.name}-v0"
+            if dataset_id and len(groups) > 1:
+                ds_id = re.sub(r"-v(\d+)$", f"-{task.name}-v\\1", dataset_id)
+            minari.create_dataset_from_buffers(
+                dataset_id=ds_id, buffer=buffers, action_space=env.action_space,
+                observation_space=env.observation_space, algorithm_name=Path(controller_file).stem,
+                description=f"hexbench {protocol} {task.name} ({mode}): {len(buffers)} logged episodes of "
+                            f"{controller_file}, replayed exactly from their logs; max {max_steps} steps",
+                author="hexbench", data_format="arrow")
+    finally:
+        if previous is None:
+            os.environ.pop("MINARI_DATASETS_PATH", None)
+        else:
+            os.environ["MINARI_DATASETS_PATH"] = previous
+    return out_root
