@@ -817,11 +817,19 @@ def _asset(name: str) -> str:
     return (ASSETS_DIR / name).read_text()
 
 
+def generator_tag() -> str:
+    """Names the plotting library version: SVG bytes are reproducible for one matplotlib version."""
+    import matplotlib
+
+    return f"hexbench leaderboard build; matplotlib {matplotlib.__version__}"
+
+
 def render_html(board: Board) -> str:
     suite = board.suite
     title = f"hexbench leaderboard: protocol {board.protocol}"
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
-           '<meta name="viewport" content="width=device-width, initial-scale=1">', f"<title>{_e(title)}</title>",
+           '<meta name="viewport" content="width=device-width, initial-scale=1">',
+           f'<meta name="generator" content="{_e(generator_tag())}">', f"<title>{_e(title)}</title>",
            "<style>", _asset("style.css").strip(), "</style>", "</head>", "<body>", "<main>"]
     out.append(f'<header><h1>hexbench leaderboard <span class="proto">protocol {_e(board.protocol)}</span></h1>'
                f'<p class="lead">Hexapod locomotion on rough terrain, slopes and stairs: success over 20 seeded '
