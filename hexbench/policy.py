@@ -69,7 +69,7 @@ def validate_config(config, where: str = "CONFIG") -> None:
     names = {f.name for f in fields(config)}
     missing = sorted({"algo", "action_mode", "net_arch", "activation"} - names)
     if missing:
-        raise ConfigError(f"{where}: config lacks field(s) {', '.join(missing)}")
+        raise ConfigError(f"{where}: CONFIG is not a training config (lacks field(s) {', '.join(missing)})")
     if config.algo not in ALGOS:
         raise ConfigError(f"{where}: algo {config.algo!r} unknown; valid: {', '.join(ALGOS)}")
     if config.action_mode not in ACTION_MODES:
