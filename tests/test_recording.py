@@ -349,3 +349,15 @@ def test_export_minari_replays_logged_episodes(tmp_path):
         assert first.observations.shape == (31, 62) and first.actions.shape == (30, 18)
     finally:
         os.environ.pop("MINARI_DATASETS_PATH", None)
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc")
+def test_recording_many_episodes_does_not_pile_up_writer_threads(tmp_path):
+    def threads() -> int:
+        return len(list(Path("/proc/self/task").iterdir()))
+
+    record_short_episode(tmp_path, "warm", steps=3)
+    before = threads()
+    for i in range(3):
+        record_short_episode(tmp_path, f"e{i}", steps=3)
+    assert threads() == before

@@ -27,7 +27,7 @@ import numpy as np
 from hexbench.recording.capture import EpisodeArrays
 from hexbench.recording.kinematics import JointFrame, joint_rotations
 from hexbench.recording.mcap_bulk import add_messages
-from hexbench.recording.numbers import json_bool_rows, json_number_rows, quantize
+from hexbench.recording.numbers import json_bool_cells, json_number_cells, quantize
 from hexbench.recording.protobuf_rows import DoubleRowEncoder, timestamp_field, varint
 
 WORLD_FRAME = "world"
@@ -148,6 +148,25 @@ def _register_protobuf(writer, cache: dict, message_class) -> int:
     return cache[name]
 
 
+def _frame_transforms_messages(ts_fields: list[bytes], parts: list[np.ndarray]) -> list[bytes]:
+    """foxglove.FrameTransforms messages: per row, each part (a FrameTransform without its timestamp)
+    prefixed with the row's timestamp and wrapped as field 1. Rows with equally long timestamps are
+    assembled together with numpy."""
+    out: list[bytes] = [b""] * len(ts_fields)
+    by_length: dict[int, list[int]] = {}
+    for i, ts in enumerate(ts_fields):
+        by_length.setdefault(len(ts), []).append(i)
+    for length, idx in by_length.items():
+        ts = np.frombuffer(b"".join(ts_fields[i] for i in idx), dtype=np.uint8).reshape(len(idx), length)
+        blocks = []
+        for part in parts:
+            head = np.frombuffer(b"\x0a" + varint(length + part.shape[1]), dtype=np.uint8)
+            blocks += [np.broadcast_to(head, (len(idx), len(head))), ts, part[idx]]
+        for i, row in zip(idx, np.concatenate(blocks, axis=1)):
+            out[i] = row.tobytes()
+    return out
+
+
 # ------------------------------------------------------------------------------- writing
 _TIMESTAMP_CACHE: dict[int, bytes] = {}
 
@@ -240,39 +259,27 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
     for j, jf in enumerate(joints):
         values = np.concatenate([np.broadcast_to(np.array(jf.origin_xyz_m), (len(rows), 3)), rot[:, j]], axis=1)
         parts.append(_transform_encoder(jf.parent_link, jf.child_link).encode(values))
-    heads: dict[int, bytes] = {}
-    tf_data = []
-    for k, r in enumerate(rows):
-        ts = ts_fields[r]
-        items = []
-        for part in parts:
-            size = len(ts) + part.shape[1]
-            head = heads.get(size)
-            if head is None:
-                head = heads[size] = b"\x0a" + varint(size)  # FrameTransforms.transforms = field 1
-            items.append(head + ts + part[k].tobytes())
-        tf_data.append(b"".join(items))
+    tf_data = _frame_transforms_messages([ts_fields[r] for r in rows], parts)
     add_messages(writer, ch["/tf"], t_rows, tf_data)
 
-    # /metrics: one JSON object per step
+    # /metrics: one JSON object per step, each made by one %-format of a row of pre-formatted cells
     n = ep.num_steps
     scalars = np.column_stack([ep.time_ns[1:] / 1e9, ep.reward, ep.reward_terms, ep.progress_m, ep.lateral_m])
     if not np.all(np.isfinite(scalars)):
         raise ValueError("cannot log NaN or infinite reward, progress or lateral values")
-    term_text = ",".join(f"{json.dumps(k)}:%.5g" for k in ep.reward_term_names)
-    head_format = ('"sim_time_s":%.5g,"reward":%.5g,"reward_terms":{' + term_text + '},"progress_m":%.5g,'
-                   '"lateral_m":%.5g')
-    action = json_number_rows(ep.action)
-    a_c, a_r, a_t = json_number_rows(ep.a_c), json_number_rows(ep.a_r), json_number_rows(ep.a_t)
-    phases, contacts = json_number_rows(ep.phases_rad), json_bool_rows(ep.foot_contacts)
-    end_reason = json.dumps(ep.end_reason)
-    texts = []
-    for k, values in enumerate(scalars.tolist()):
-        step = k + 1
-        texts.append((f'{{"step":{step},' + head_format % tuple(values)
-                      + f',"action":[{action[k]}],"a_c":[{a_c[k]}],"a_r":[{a_r[k]}],"a_t":[{a_t[k]}],'
-                      f'"phases_rad":[{phases[k]}],"foot_contacts":[{contacts[k]}],'
-                      f'"end_reason":{end_reason if step == n else "null"}}}').encode())
+    arrays = [("action", json_number_cells(ep.action)), ("a_c", json_number_cells(ep.a_c)),
+              ("a_r", json_number_cells(ep.a_r)), ("a_t", json_number_cells(ep.a_t)),
+              ("phases_rad", json_number_cells(ep.phases_rad)), ("foot_contacts", json_bool_cells(ep.foot_contacts))]
+    terms = ",".join(f"{json.dumps(k)}:%.5g" for k in ep.reward_term_names)
+    template = ('{"step":%d,"sim_time_s":%.5g,"reward":%.5g,"reward_terms":{' + terms + '},"progress_m":%.5g,'
+                '"lateral_m":%.5g,' + ",".join(f'"{name}":[' + ",".join(["%s"] * cells.shape[1]) + "]"
+                                               for name, cells in arrays) + ',"end_reason":%s}')
+    end_reasons = np.full((n, 1), "null", dtype=object)
+    if n:
+        end_reasons[-1, 0] = json.dumps(ep.end_reason)
+    cells = np.concatenate([np.arange(1, n + 1, dtype=object)[:, None], scalars.astype(object)]
+                           + [c for _, c in arrays] + [end_reasons], axis=1)
+    texts = [(template % tuple(row)).encode() for row in cells.tolist()]
     add_messages(writer, ch["/metrics"], t[1:], texts)
 
     writer.add_metadata("outcome", {k: json.dumps(v) for k, v in sorted(outcome.items())})

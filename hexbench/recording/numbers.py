@@ -33,12 +33,9 @@ def _lut() -> np.ndarray:
     return np.array([_fixed_text(i) for i in range(-_LUT_MAX, _LUT_MAX + 1)], dtype=object)
 
 
-def json_number_rows(x: np.ndarray) -> list[str]:
-    """(n, m) floats -> n strings 'v1,v2,...' with each value rounded to JSON_DECIMALS decimals."""
+def json_number_cells(x: np.ndarray) -> np.ndarray:
+    """(n, m) floats -> (n, m) object array of JSON number text, each rounded to JSON_DECIMALS decimals."""
     x = np.asarray(x, dtype=np.float64)
-    n = x.shape[0]
-    if x.ndim != 2 or x.shape[1] == 0:
-        return [""] * n
     if not np.all(np.isfinite(x)):
         raise ValueError("cannot log NaN or infinite values")
     ints = np.rint(x * 10 ** JSON_DECIMALS).astype(np.int64)
@@ -46,10 +43,9 @@ def json_number_rows(x: np.ndarray) -> list[str]:
     text = _lut()[np.where(inside, ints, 0) + _LUT_MAX]
     if not inside.all():
         text[~inside] = [_fixed_text(int(i)) for i in ints[~inside]]
-    return [",".join(row) for row in text.tolist()]
+    return text
 
 
-def json_bool_rows(x: np.ndarray) -> list[str]:
-    """(n, m) bools -> n strings 'true,false,...'."""
-    words = np.array(["false", "true"], dtype=object)[np.asarray(x, dtype=np.int64)]
-    return [",".join(row) for row in words.tolist()]
+def json_bool_cells(x: np.ndarray) -> np.ndarray:
+    """(n, m) bools -> (n, m) object array of 'true' / 'false'."""
+    return np.array(["false", "true"], dtype=object)[np.asarray(x, dtype=np.int64)]

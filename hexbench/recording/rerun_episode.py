@@ -104,9 +104,10 @@ def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf:
                       settings: RerunSettings = RerunSettings()) -> None:
     """Write the episode's .rrd to `path` (the caller renames it into place)."""
     import rerun as rr
+    import rerun_bindings
 
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, send_properties=False)
-    rec.save(str(path), default_blueprint=blueprint())
+    blueprint_stream = _save_with_blueprint(rec, path)
     try:
         rec.send_recording_name(recording_id)
         rec.send_chunks(list(_urdf_chunks(urdf)))
@@ -159,6 +160,36 @@ def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf:
         rec.flush()
     finally:
         rec.disconnect()
+        if blueprint_stream is not None:
+            blueprint_stream.disconnect()
+        # Drop both streams so their writer threads end (else they pile up, four per episode, in a worker).
+        del rec, blueprint_stream
+        rerun_bindings.flush_and_cleanup_orphaned_recordings()
+
+
+def _save_with_blueprint(rec, path: Path):
+    """`rec.save(path, default_blueprint=blueprint())`, keeping hold of the blueprint's stream.
+
+    The public call builds the blueprint in an in-memory stream it never releases (two threads
+    leak per call, measured with rerun-sdk 0.41), so it is done here step by step with the same
+    calls `rerun.sinks.save` makes, and the caller disconnects the returned stream. Falls back to
+    the public call if those internals change.
+    """
+    import rerun as rr
+
+    try:
+        from rerun import bindings
+
+        bp_stream = rr.RecordingStream._from_native(bindings.new_blueprint(
+            application_id=APPLICATION_ID, make_default=False, make_thread_default=False, default_enabled=True))
+        bp_stream.set_time("blueprint", sequence=0)
+        blueprint().to_blueprint()._log_to_stream(bp_stream)
+        storage = bp_stream.memory_recording().storage
+        bindings.save(path=str(path), default_blueprint=storage, recording=rec.to_native(), write_footer=True)
+        return bp_stream
+    except (AttributeError, TypeError):
+        rec.save(str(path), default_blueprint=blueprint())
+        return None
 
 
 def verify_rrd(path: str | Path) -> None:
