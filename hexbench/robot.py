@@ -17,7 +17,8 @@ Where the numbers come from (see also docs/robot.md):
   Servo stall torque 3.5 N m and no-load speed ~6 rad/s: JetHexa uses Hiwonder HX-35H class
   bus servos (35 kg cm stall at 7.4 V ~= 3.4 N m, 0.18 s / 60 deg ~= 5.8 rad/s).
   Mass split, leg mount points and joint limits: our estimates from JetHexa photos and
-  drawings; they reproduce Table 3's overall dimensions (checked in tests).
+  drawings. The overall footprint at the zero stance is 44.4 x 44.0 cm, larger than Table 3's
+  39.7 x 42.6 cm (a known mismatch, kept for protocol v1; see docs/robot.md).
 """
 
 from __future__ import annotations

@@ -60,13 +60,15 @@ class RobotState:
     base_pos_m: np.ndarray  # (3,) world xyz
     base_quat_xyzw: np.ndarray  # (4,)
     base_rpy_rad: np.ndarray  # (3,) roll, pitch, yaw
-    base_lin_vel_m_per_s: np.ndarray  # (3,)
+    up_z: float = 1.0  # z component of the body's up axis: cos of the body's tilt from vertical
+    client: int = -1
+    robot_id: int = -1
 
     @property
-    def up_z(self) -> float:
-        """z component of the body's up axis: cos of the body's tilt from vertical."""
-        x, y, _, _ = self.base_quat_xyzw
-        return float(1.0 - 2.0 * (x * x + y * y))
+    def base_lin_vel_m_per_s(self) -> np.ndarray:
+        """(3,) world linear velocity of the base [m/s] (read on demand: not needed every step)."""
+        lin, _ = p.getBaseVelocity(self.robot_id, physicsClientId=self.client)
+        return np.array(lin)
 
 
 @lru_cache(maxsize=4)
@@ -123,8 +125,9 @@ class Simulation:
 
     def send_targets(self, targets_rad: np.ndarray) -> np.ndarray:
         """Command joint targets (clipped to limits, rate-limited to servo speed); return what was sent."""
-        wanted = np.clip(targets_rad, self.joint_lower_rad, self.joint_upper_rad)
-        step = np.clip(wanted - self._command, -self._max_delta_rad, self._max_delta_rad)
+        # np.minimum/np.maximum: same values as np.clip at a fraction of its per-call cost
+        wanted = np.minimum(np.maximum(targets_rad, self.joint_lower_rad), self.joint_upper_rad)
+        step = np.minimum(np.maximum(wanted - self._command, -self._max_delta_rad), self._max_delta_rad)
         self._command = self._command + step
         p.setJointMotorControlArray(self.robot_id, self.joint_indices, p.POSITION_CONTROL,
                                     targetPositions=self._command.tolist(), forces=self._forces,
@@ -138,17 +141,18 @@ class Simulation:
 
     def state(self) -> RobotState:
         c, r = self.client, self.robot_id
-        js = p.getJointStates(r, self.joint_indices, physicsClientId=c)
+        q, qd, _, tau = zip(*p.getJointStates(r, self.joint_indices, physicsClientId=c))
         pos, quat = p.getBasePositionAndOrientation(r, physicsClientId=c)
-        lin, _ = p.getBaseVelocity(r, physicsClientId=c)
         return RobotState(
-            joint_pos_rad=np.array([s[0] for s in js]),
-            joint_vel_rad_per_s=np.array([s[1] for s in js]),
-            joint_torque_nm=np.array([s[3] for s in js]),
+            joint_pos_rad=np.array(q),
+            joint_vel_rad_per_s=np.array(qd),
+            joint_torque_nm=np.array(tau),
             base_pos_m=np.array(pos),
             base_quat_xyzw=np.array(quat),
             base_rpy_rad=np.array(p.getEulerFromQuaternion(quat)),
-            base_lin_vel_m_per_s=np.array(lin),
+            up_z=1.0 - 2.0 * (quat[0] * quat[0] + quat[1] * quat[1]),
+            client=c,
+            robot_id=r,
         )
 
     def foot_contacts(self) -> np.ndarray:
