@@ -145,13 +145,17 @@ def test_logged_numbers_match_the_simulation(episode):
     expected = []
     for _ in range(SHORT_STEPS):
         _, reward, _, _, info = env.step(np.zeros(18))
-        expected.append((reward, info["a_c"].copy(), info["progress_m"]))
+        expected.append((reward, info["a_c"].copy(), info["progress_m"], env.cpg.phases_rad.copy(),
+                         env.sim.foot_contacts()))
     env.close()
     rows = metrics(out / files["mcap_path"])
-    for row, (reward, a_c, progress) in zip(rows, expected):
+    assert len(rows) == len(expected)
+    for row, (reward, a_c, progress, phases, contacts) in zip(rows, expected):
         assert row["reward"] == pytest.approx(reward, rel=1e-4, abs=1e-9)
         assert np.allclose(row["a_c"], a_c, atol=5e-4)
         assert row["progress_m"] == pytest.approx(progress, rel=1e-4, abs=1e-6)
+        assert np.allclose(row["phases_rad"], phases, atol=5e-4)
+        assert row["foot_contacts"] == contacts.tolist()
 
 
 def test_rrd_passes_rerun_verify_and_carries_the_episode_id(episode):
@@ -361,3 +365,18 @@ def test_recording_many_episodes_does_not_pile_up_writer_threads(tmp_path):
     for i in range(3):
         record_short_episode(tmp_path, f"e{i}", steps=3)
     assert threads() == before
+
+
+def test_whole_robot_contact_query_agrees_with_per_foot_query():
+    from hexbench.recording.capture import foot_contacts
+
+    env = HexapodEnv(terrain="rough", level=8.0, max_steps=200)
+    env.reset(seed=3)
+    seen = set()
+    for _ in range(120):
+        env.step(np.zeros(18))
+        ours = foot_contacts(env.sim)
+        assert np.array_equal(ours, env.sim.foot_contacts())
+        seen.add(tuple(ours))
+    env.close()
+    assert len(seen) > 2  # feet lift and land: the comparison covered changing contacts

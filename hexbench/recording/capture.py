@@ -44,48 +44,67 @@ class EpisodeArrays:
         return len(self.reward)
 
 
+def touching_links(sim) -> frozenset:
+    """Link indices of the robot that touch anything now (one contact query for the whole robot).
+
+    Inside a running episode this is ~2.5x cheaper than `Simulation.foot_contacts()` (one query
+    per foot; measured 19 vs 48 us per step), and the contact query is most of what recording
+    costs per step.
+    """
+    import pybullet as p
+
+    return frozenset(c[3] for c in p.getContactPoints(bodyA=sim.robot_id, physicsClientId=sim.client))
+
+
+def foot_contacts(sim) -> np.ndarray:
+    """Which feet touch anything: (6,) bool, the same answer as `Simulation.foot_contacts()` (tested)."""
+    touching = touching_links(sim)
+    return np.array([link in touching for link in sim.foot_link_indices])
+
+
 def sim_time_ns(steps: np.ndarray | int, control_dt_s: float) -> np.ndarray:
     """Simulated time of control step k [ns], exact integer arithmetic on the rounded period."""
     return np.asarray(steps, dtype=np.int64) * np.int64(round(control_dt_s * 1e9))
 
 
 class EpisodeCapture:
-    """Collects an episode from the environment (see module docstring)."""
+    """Collects an episode from the environment (see module docstring).
+
+    It keeps references, not copies, of what the env returns (fresh arrays every step: the
+    state, a_c, a_r, the sent targets); only the caller's action is copied.
+    """
 
     def __init__(self) -> None:
         self._state: list = []
         self._steps: list[tuple] = []
-        self._term_names: tuple[str, ...] | None = None
-        self._end_reason: str | None = None
+        self._foot_links: tuple[int, ...] = ()
         self.control_dt_s = 1.0 / 60.0
 
     def reset(self, env) -> None:
         self.control_dt_s = env.config.physics.control_dt_s
+        self._foot_links = tuple(env.sim.foot_link_indices)
         self._state = [env.robot_state]
         self._steps = []
-        self._end_reason = None
 
     def step(self, env, action, reward, info) -> None:
-        terms = info["reward_terms"]
-        if self._term_names is None:
-            self._term_names = tuple(terms)
+        # Only references to what the env made fresh this step, plus the contact query: the rest
+        # (phases from the oscillator state z, contacts per foot, the info fields) is unpacked
+        # once, vectorised, in arrays().
         self._state.append(env.robot_state)
-        self._steps.append((
-            float(reward), tuple(terms.values()), np.array(action, dtype=np.float64), info["a_c"], info["a_r"],
-            np.array(info["a_t"], dtype=np.float64), env.cpg.phases_rad, env.sim.foot_contacts(),
-            info["progress_m"], info["lateral_m"],
-        ))
-        self._end_reason = info.get("end_reason")
+        self._steps.append((float(reward), info, np.array(action, dtype=np.float64), env.cpg.z,
+                            touching_links(env.sim)))
 
     def arrays(self) -> EpisodeArrays:
         states = self._state
-        cols = list(zip(*self._steps)) if self._steps else [()] * 10
-        n = len(self._steps)
+        steps = self._steps
+        n = len(steps)
+        infos = [st[1] for st in steps]
+        term_names = tuple(infos[0]["reward_terms"]) if n else ()
+        feet = self._foot_links
 
-        def stack(seq, width, dtype=np.float64):
-            return np.array(seq, dtype=dtype).reshape(n, width) if n else np.zeros((0, width), dtype)
+        def stack(values, width, dtype=np.float64):
+            return np.array(values, dtype=dtype).reshape(n, width) if n else np.zeros((0, width), dtype)
 
-        action_dim = len(cols[2][0]) if n else 18
         return EpisodeArrays(
             control_dt_s=self.control_dt_s,
             time_ns=sim_time_ns(np.arange(n + 1), self.control_dt_s),
@@ -94,16 +113,16 @@ class EpisodeCapture:
             joint_torque_nm=np.array([s.joint_torque_nm for s in states]),
             base_pos_m=np.array([s.base_pos_m for s in states]),
             base_quat_xyzw=np.array([s.base_quat_xyzw for s in states]),
-            reward=np.array(cols[0], dtype=np.float64).reshape(n),
-            reward_term_names=self._term_names or (),
-            reward_terms=stack(cols[1], len(self._term_names or ())),
-            action=stack(cols[2], action_dim),
-            a_c=stack(cols[3], len(JOINT_NAMES)),
-            a_r=stack(cols[4], len(JOINT_NAMES)),
-            a_t=stack(cols[5], len(JOINT_NAMES)),
-            phases_rad=stack(cols[6], 6),
-            foot_contacts=stack(cols[7], len(FOOT_LINK_NAMES), dtype=bool),
-            progress_m=np.array(cols[8], dtype=np.float64).reshape(n),
-            lateral_m=np.array(cols[9], dtype=np.float64).reshape(n),
-            end_reason=self._end_reason,
+            reward=np.array([st[0] for st in steps], dtype=np.float64).reshape(n),
+            reward_term_names=term_names,
+            reward_terms=stack([[i["reward_terms"][k] for k in term_names] for i in infos], len(term_names)),
+            action=stack([st[2] for st in steps], len(steps[0][2]) if n else 18),
+            a_c=stack([i["a_c"] for i in infos], len(JOINT_NAMES)),
+            a_r=stack([i["a_r"] for i in infos], len(JOINT_NAMES)),
+            a_t=stack([i["a_t"] for i in infos], len(JOINT_NAMES)),
+            phases_rad=np.angle(np.array([st[3] for st in steps])).reshape(n, -1) if n else np.zeros((0, 6)),
+            foot_contacts=stack([[f in st[4] for f in feet] for st in steps], len(FOOT_LINK_NAMES), dtype=bool),
+            progress_m=np.array([i["progress_m"] for i in infos], dtype=np.float64).reshape(n),
+            lateral_m=np.array([i["lateral_m"] for i in infos], dtype=np.float64).reshape(n),
+            end_reason=infos[-1].get("end_reason") if n else None,
         )

@@ -99,6 +99,22 @@ def _urdf_chunks(urdf: str) -> tuple:
     return tuple(merged)
 
 
+@lru_cache(maxsize=4)
+def _static_archetypes(joints: tuple[JointFrame, ...], reward_term_names: tuple[str, ...]) -> tuple:
+    """The static per-entity data that is the same in every episode, built once per process."""
+    import rerun as rr
+
+    out = [("/world/base", rr.Transform3D(parent_frame=WORLD_FRAME, child_frame="base"))]
+    out += [(f"/joints/{jf.name}", rr.Transform3D(parent_frame=jf.parent_link, child_frame=jf.child_link,
+                                                  translation=jf.origin_xyz_m)) for jf in joints]
+    out += [("/plots/reward", rr.SeriesLines(names=["reward"])),
+            ("/plots/position_m", rr.SeriesLines(names=["progress", "lateral", "base height"])),
+            ("/plots/attitude_deg", rr.SeriesLines(names=["roll", "pitch"]))]
+    if reward_term_names:
+        out.append(("/plots/reward_terms", rr.SeriesLines(names=list(reward_term_names))))
+    return tuple(out)
+
+
 def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf: str, joints: list[JointFrame],
                       mesh: tuple[np.ndarray, np.ndarray], goal_x_m: float,
                       settings: RerunSettings = RerunSettings()) -> None:
@@ -117,15 +133,13 @@ def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf:
         times = [rr.TimeColumn("sim_time", duration=ep.time_ns[rows] / 1e9)]
 
         # robot: base pose and joint rotations over time, frames static
-        rec.log("/world/base", rr.Transform3D(parent_frame=WORLD_FRAME, child_frame="base"), static=True)
+        for entity, archetype in _static_archetypes(tuple(joints), tuple(ep.reward_term_names)):
+            rec.log(entity, archetype, static=True)
         rec.send_columns("/world/base", times, rr.Transform3D.columns(
             translation=ep.base_pos_m[rows].astype(np.float32), quaternion=ep.base_quat_xyzw[rows].astype(np.float32)))
         rot = joint_rotations(joints, ep.joint_pos_rad[rows]).astype(np.float32)
         for j, jf in enumerate(joints):
-            entity = f"/joints/{jf.name}"
-            rec.log(entity, rr.Transform3D(parent_frame=jf.parent_link, child_frame=jf.child_link,
-                                           translation=jf.origin_xyz_m), static=True)
-            rec.send_columns(entity, times, rr.Transform3D.columns(quaternion=rot[:, j]))
+            rec.send_columns(f"/joints/{jf.name}", times, rr.Transform3D.columns(quaternion=rot[:, j]))
 
         # world: terrain, path, goal line
         vertices, triangles = mesh
@@ -143,18 +157,14 @@ def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf:
         steps = rows[rows > 0]
         k = steps - 1
         step_times = [rr.TimeColumn("sim_time", duration=ep.time_ns[steps] / 1e9)]
-        rec.log("/plots/reward", rr.SeriesLines(names=["reward"]), static=True)
         rec.send_columns("/plots/reward", step_times, rr.Scalars.columns(scalars=ep.reward[k]))
         names = list(ep.reward_term_names)
         if names:
-            rec.log("/plots/reward_terms", rr.SeriesLines(names=names), static=True)
             rec.send_columns("/plots/reward_terms", step_times,
                              rr.Scalars.columns(scalars=ep.reward_terms[k]).partition([len(names)] * len(k)))
         pos = np.stack([ep.progress_m[k], ep.lateral_m[k], ep.base_pos_m[steps, 2]], axis=1)
-        rec.log("/plots/position_m", rr.SeriesLines(names=["progress", "lateral", "base height"]), static=True)
         rec.send_columns("/plots/position_m", step_times, rr.Scalars.columns(scalars=pos).partition([3] * len(k)))
         roll, pitch = _rpy_deg(ep.base_quat_xyzw[steps])
-        rec.log("/plots/attitude_deg", rr.SeriesLines(names=["roll", "pitch"]), static=True)
         rec.send_columns("/plots/attitude_deg", step_times,
                          rr.Scalars.columns(scalars=np.stack([roll, pitch], axis=1)).partition([2] * len(k)))
         rec.flush()
