@@ -1,0 +1,111 @@
+"""HLTA (paper Fig. 2): look at the terrain ahead, classify it, dispatch that terrain's PPO-CPG policy.
+
+    controller = make_controller(task)        # loads the classifier and the three PPO-CPG policies
+    controller.see(image)                     # a robot-camera image (hexbench.dataset.views.TERRAIN_CAMERA)
+    action = controller.act(obs)              # the chosen terrain's PPO-CPG residual, rescaled to its eps
+
+High level: the terrain classifier (hexbench.classifier, LeNet + self-attention, shipped weights
+baselines/checkpoints/terrain_classifier.pt, sha256-checked) labels each image rough, slopes or
+stairs; the label in force is the majority of the last `Config.vote_window` labels, so one odd frame
+does not switch gaits. Low level: the PPO-CPG policy trained on that terrain (baselines/ppo_cpg.py
+and its shipped weights), acting with that terrain's eps (paper 3.2: 0.6, 0.4, 0.3). The environment
+applies a_t = a_c + eps_env * a_r, so the residual a_r_k of policy k is sent as a_r_k * eps_k / eps_env
+(clipped to [-1, 1]); run the course with eps_env >= 0.6 so that no residual is clipped.
+
+Status (hexbench 0.1.0): **not yet evaluable.** The submission protocol passes observations only, so a
+camera-aware runner has to call `see(image)` (the controller says which camera it wants in `camera`);
+neither that runner nor the mixed course task (rough, then slope, then stairs) exists yet, and the
+PPO-CPG weights are not shipped yet. Until an image has been seen, `act` refuses to guess.
+"""
+
+from __future__ import annotations
+
+from collections import Counter, deque
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+
+
+@dataclass(frozen=True)
+class Config:
+    low_level_baseline: str = "ppo_cpg.py"  # per-terrain policies, from this baseline file
+    classifier_checkpoint: str = "checkpoints/terrain_classifier.pt"
+    vote_window: int = 3  # labels in the majority vote
+    terrains: tuple[str, ...] = ("rough", "slopes", "stairs")  # the classifier's classes, in order
+
+
+CONFIG = Config()
+
+
+class HLTAController:
+    action_mode = "cpg_residual"
+
+    def __init__(self, policies: dict, classify, env_eps: float, config: Config = CONFIG):
+        from hexbench.dataset.views import TERRAIN_CAMERA
+        from hexbench.env import DEFAULT_RESIDUAL_SCALE
+
+        missing = sorted(set(config.terrains) - set(policies))
+        if missing:
+            raise ValueError(f"HLTA needs a low-level policy for every terrain; missing: {', '.join(missing)}")
+        self.camera = TERRAIN_CAMERA
+        self.policies = policies
+        self.classify = classify  # image (H, W, 3) uint8 -> terrain name
+        self.env_eps = float(env_eps)
+        self.eps = {t: DEFAULT_RESIDUAL_SCALE[t] for t in config.terrains}
+        self.votes: deque[str] = deque(maxlen=config.vote_window)
+        self.terrain: str | None = None
+        self.switches = 0
+
+    def reset(self, seed: int) -> None:
+        self.votes.clear()
+        self.terrain = None
+        self.switches = 0
+        for policy in self.policies.values():
+            policy.reset(seed)
+
+    def see(self, image: np.ndarray) -> str:
+        """Classify one camera image; return the terrain now in force (majority of recent labels)."""
+        self.votes.append(self.classify(image))
+        counts = Counter(self.votes)
+        best = max(counts.values())
+        # ties keep the current terrain; otherwise the most recent of the tied labels wins
+        tied = [t for t in reversed(self.votes) if counts[t] == best]
+        chosen = self.terrain if self.terrain in tied else tied[0]
+        if chosen != self.terrain and self.terrain is not None:
+            self.switches += 1
+        self.terrain = chosen
+        return chosen
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        if self.terrain is None:
+            raise RuntimeError("HLTA has not seen the terrain yet: call see(camera image) before act(obs) "
+                               "(run it with a camera-aware runner)")
+        residual = np.asarray(self.policies[self.terrain].act(obs), dtype=np.float32)
+        return np.clip(residual * (self.eps[self.terrain] / self.env_eps), -1.0, 1.0).astype(np.float32)
+
+
+def make_classify(checkpoint: Path):
+    """image -> terrain name, with the sha256-checked shipped classifier."""
+    import torch
+
+    from hexbench.classifier import load_classifier, predict
+    from hexbench.dataset.views import TERRAIN_CLASSES
+
+    torch.set_num_threads(1)
+    model = load_classifier(checkpoint)
+    return lambda image: TERRAIN_CLASSES[int(predict(model, np.asarray(image)[None])[0])]
+
+
+def make_controller(task, config: Config = CONFIG) -> HLTAController:
+    """The HLTA controller with the shipped classifier and the shipped PPO-CPG policy of every terrain."""
+    from hexbench.controller import load_controller_module
+    from hexbench.env import DEFAULT_RESIDUAL_SCALE
+    from hexbench.policy import make_policy_controller
+
+    low = load_controller_module(HERE / config.low_level_baseline)
+    policies = {t: make_policy_controller(low.CONFIG, low.CHECKPOINTS_DIR, "ppo_cpg", t) for t in config.terrains}
+    env_eps = DEFAULT_RESIDUAL_SCALE.get(task.terrain, max(DEFAULT_RESIDUAL_SCALE.values()))
+    return HLTAController(policies, make_classify(HERE / config.classifier_checkpoint), env_eps, config)

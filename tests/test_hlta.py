@@ -1,0 +1,82 @@
+"""HLTA controller (baselines/hlta.py): vote, dispatch and eps rescaling, with stub low-level policies."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+HLTA_PATH = Path(__file__).resolve().parents[1] / "baselines" / "hlta.py"
+
+
+def _hlta():
+    from hexbench.controller import load_controller_module
+
+    return load_controller_module(HLTA_PATH)
+
+
+class ConstantPolicy:
+    action_mode = "cpg_residual"
+
+    def __init__(self, value: float):
+        self.value = value
+        self.seeds = []
+
+    def reset(self, seed: int) -> None:
+        self.seeds.append(seed)
+
+    def act(self, obs):
+        return np.full(18, self.value, np.float32)
+
+
+def _controller(labels):
+    hlta = _hlta()
+    feed = iter(labels)
+    policies = {"rough": ConstantPolicy(1.0), "slopes": ConstantPolicy(0.5), "stairs": ConstantPolicy(-1.0)}
+    return hlta.HLTAController(policies, lambda image: next(feed), env_eps=0.6)
+
+
+def test_refuses_to_act_before_seeing():
+    ctrl = _controller([])
+    ctrl.reset(0)
+    with pytest.raises(RuntimeError, match="call see"):
+        ctrl.act(np.zeros(62, np.float32))
+
+
+def test_majority_vote_and_eps_rescaling():
+    ctrl = _controller(["rough", "stairs", "rough", "stairs", "stairs", "slopes"])
+    ctrl.reset(3)
+    obs = np.zeros(62, np.float32)
+    assert ctrl.see(None) == "rough"
+    np.testing.assert_allclose(ctrl.act(obs), 1.0)  # eps 0.6 / env 0.6
+    assert ctrl.see(None) == "rough"  # 1-1 tie keeps the current terrain
+    assert ctrl.see(None) == "rough"
+    assert ctrl.see(None) == "stairs"  # window (stairs, rough, stairs)
+    np.testing.assert_allclose(ctrl.act(obs), -1.0 * 0.3 / 0.6)
+    assert ctrl.see(None) == "stairs"
+    assert ctrl.see(None) == "stairs"  # one odd "slopes" frame does not switch
+    assert ctrl.switches == 1
+    assert all(p.seeds == [3] for p in ctrl.policies.values())
+
+
+def test_needs_a_policy_per_terrain():
+    hlta = _hlta()
+    with pytest.raises(ValueError, match="missing: stairs"):
+        hlta.HLTAController({"rough": ConstantPolicy(0), "slopes": ConstantPolicy(0)}, lambda i: "rough", 0.6)
+
+
+@pytest.mark.skipif(not (HLTA_PATH.parent / "checkpoints" / "terrain_classifier.pt").is_file(),
+                    reason="no shipped classifier weights")
+def test_shipped_classifier_sees_stairs_from_the_robot_camera():
+    from hexbench.dataset.views import TerrainInstance, View, render_view
+    from hexbench.sim import Simulation
+
+    classify = _hlta().make_classify(HLTA_PATH.parent / "checkpoints" / "terrain_classifier.pt")
+    sim = Simulation()
+    try:
+        for terrain, level in (("stairs", 6.0), ("slopes", 15.0), ("rough", 10.0)):
+            view = View(TerrainInstance(terrain, level, 12345, (0.7, 0.6, 0.45)), -0.2, 0.0, 0.0)
+            assert classify(render_view(sim, view)) == terrain
+    finally:
+        sim.close()
