@@ -256,6 +256,29 @@ def test_download_errors_are_one_clear_line(tmp_path, server):
         download("other", registry_path=tmp_path / "registry.toml", cache_dir=tmp_path / "c")
 
 
+def test_placeholder_mirror_is_named_as_such(tmp_path):
+    entry = RegistryEntry("terrain-images", "1.0.0", "t.tar.gz", "0" * 64, 10, ("https://mirror.hexbench.invalid/t.tar.gz",))
+    write_registry({"terrain-images": entry}, tmp_path / "registry.toml")
+    with pytest.raises(DownloadError, match="placeholder .no public mirror yet.*HEXBENCH_DATASET_URL"):
+        download("terrain-images", registry_path=tmp_path / "registry.toml", cache_dir=tmp_path / "c")
+
+
+def test_publish_cli_prints_the_entry_of_a_deterministic_archive(tiny_build, tmp_path):
+    args = ["dataset", "publish", "terrain-images", "--build", str(tiny_build), "--url", "http://127.0.0.1:1/x.tar.gz"]
+    first = CliRunner().invoke(app, args + ["--out", str(tmp_path / "a")])
+    second = CliRunner().invoke(app, args + ["--out", str(tmp_path / "b")])
+    assert first.exit_code == 0, first.output
+    archive = tmp_path / "a" / "terrain-images-1.0.0.tar.gz"
+    import hashlib
+    import tomllib
+
+    entry = tomllib.loads(first.output.split("\n", 1)[1])["terrain-images"]
+    assert entry["sha256"] == hashlib.sha256(archive.read_bytes()).hexdigest()
+    assert entry["size_bytes"] == archive.stat().st_size and entry["urls"] == ["http://127.0.0.1:1/x.tar.gz"]
+    assert (tmp_path / "b" / archive.name).read_bytes() == archive.read_bytes()
+    assert first.output.split("\n", 1)[1] == second.output.split("\n", 1)[1]
+
+
 def test_shipped_registry_is_well_formed():
     from hexbench.dataset.registry import load_registry
 
