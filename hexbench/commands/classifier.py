@@ -21,12 +21,14 @@ def _print_report(report: dict, title: str) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    table = Table(title=f"{title}: accuracy {100 * report['accuracy']:.2f}% on {report['num_images']} images")
+    console = Console()
+    console.print(f"{title}: accuracy {100 * report['accuracy']:.2f}% on {report['num_images']} images")
+    table = Table()
     for col in ("class", "precision", "recall", "support"):
         table.add_column(col)
     for name, m in report["per_class"].items():
         table.add_row(name, f"{100 * m['precision']:.1f}%", f"{100 * m['recall']:.1f}%", str(m["support"]))
-    Console().print(table)
+    console.print(table)
 
 
 def register(app: typer.Typer) -> None:
