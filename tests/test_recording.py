@@ -380,3 +380,45 @@ def test_whole_robot_contact_query_agrees_with_per_foot_query():
         seen.add(tuple(ours))
     env.close()
     assert len(seen) > 2  # feet lift and land: the comparison covered changing contacts
+
+
+def test_message_index_points_at_every_message(episode):
+    """Foxglove's indexed reader needs the per-channel message index; it is written by hand in bulk."""
+    import struct
+
+    import zstandard
+    from mcap.records import Chunk, ChunkIndex, MessageIndex
+    from mcap.stream_reader import StreamReader
+
+    out, files = episode
+    chunks, indexes, chunk_indexes = [], [], []
+    with open(out / files["mcap_path"], "rb") as f:
+        for record in StreamReader(f, emit_chunks=True, validate_crcs=True).records:
+            if isinstance(record, Chunk):
+                chunks.append(record)
+            elif isinstance(record, MessageIndex):
+                indexes.append(record)
+            elif isinstance(record, ChunkIndex):
+                chunk_indexes.append(record)
+    assert len(chunks) == 1 and len(chunk_indexes) == 1 and chunk_indexes[0].message_index_length > 0
+    data = zstandard.decompress(chunks[0].data, chunks[0].uncompressed_size)
+    counted = 0
+    for index in indexes:
+        assert index.channel_id in chunk_indexes[0].message_index_offsets
+        for log_time, offset in index.records:
+            opcode, _length, channel, _seq, t_log, _t_pub = struct.unpack_from("<BQHIQQ", data, offset)
+            assert (opcode, channel, t_log) == (0x05, index.channel_id, log_time)
+            assert chunks[0].message_start_time <= log_time <= chunks[0].message_end_time
+            counted += 1
+    assert counted == sum(1 for _ in _all_message_records(data))
+
+
+def _all_message_records(data: bytes):
+    import struct
+
+    at = 0
+    while at < len(data):
+        opcode, length = struct.unpack_from("<BQ", data, at)
+        if opcode == 0x05:
+            yield at
+        at += 9 + length

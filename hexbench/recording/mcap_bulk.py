@@ -34,6 +34,7 @@ def add_messages(writer, channel_id: int, log_times_ns: Sequence[int], datas: Se
     index = chunk.message_indices.get(channel_id)
     if not index:
         index = chunk.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
+    buffer.seek(0, 2)
     pos = buffer.tell()
     pack = _MESSAGE_HEADER.pack
     parts = []
@@ -43,7 +44,6 @@ def add_messages(writer, channel_id: int, log_times_ns: Sequence[int], datas: Se
         records.append((t, pos))
         parts.append(rec)
         pos += len(rec)
-    buffer.seek(0, 2)
     buffer.write(b"".join(parts))
     t_min, t_max = min(log_times_ns), max(log_times_ns)
     n = len(datas)

@@ -198,10 +198,10 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
     from mcap.writer import CompressionType, IndexType, Writer
 
-    # No per-message index records: the episode is one chunk that a reader decompresses whole
-    # anyway, and the index would add 16 uncompressed bytes per message (~12% of the file).
+    # All index types: Foxglove's indexed reader (@mcap/core ChunkCursor) rejects a chunk with
+    # messages but no message index records, although they cost 16 uncompressed bytes per message.
     writer = Writer(stream, chunk_size=precision.chunk_size_bytes, compression=CompressionType.ZSTD,
-                    index_types=IndexType.ALL & ~IndexType.MESSAGE, enable_crcs=True, enable_data_crcs=True)
+                    index_types=IndexType.ALL, enable_crcs=True, enable_data_crcs=True)
     writer.start(profile="", library=library)
     schemas: dict[str, int] = {}
     ch = {

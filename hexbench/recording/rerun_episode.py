@@ -33,7 +33,7 @@ WORLD_FRAME = "tf#/world"
 
 @dataclass(frozen=True)
 class RerunSettings:
-    every_n_steps: int = 8  # 7.5 Hz at 60 Hz control
+    every_n_steps: int = 10  # 6 Hz at 60 Hz control
 
 
 def _rpy_deg(quat_xyzw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
