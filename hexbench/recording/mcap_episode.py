@@ -1,4 +1,4 @@
-"""One episode as an MCAP file that Foxglove opens directly, and reading such a file back.
+"""One episode as an MCAP file that Foxglove opens directly (reading it back: reader.py).
 
 Channels (log time = publish time = simulated time since reset [ns]; no wall clock anywhere,
 so the same episode always gives the same bytes):
@@ -46,7 +46,7 @@ class McapPrecision:
     rotation_bits: int = 12  # quaternion components
     joint_states_every_n_steps: int = 3  # /joint_states at 20 Hz (60 Hz control)
     tf_every_n_steps: int = 6  # /tf and /base_pose at 10 Hz (Foxglove interpolates transforms)
-    chunk_size_bytes: int = 8 * 1024 * 1024  # one chunk per channel group: best compression
+    chunk_size_bytes: int = 8 * 1024 * 1024  # the whole episode in one chunk, channels grouped: best compression
 
 
 METRICS_SCHEMA = {
@@ -57,7 +57,7 @@ METRICS_SCHEMA = {
     "type": "object",
     "properties": {
         "step": {"type": "integer", "description": "control step, 1-based"},
-        "sim_time_s": {"type": "number"},
+        "sim_time_s": {"type": "number", "description": "5 significant digits; the log time is exact"},
         "reward": {"type": "number", "description": "R' = (1 + delta) R (eqs 7-8)"},
         "reward_terms": {"type": "object", "additionalProperties": {"type": "number"},
                          "description": "unweighted Table 1 terms"},
