@@ -422,3 +422,28 @@ def _all_message_records(data: bytes):
         if opcode == 0x05:
             yield at
         at += 9 + length
+
+
+def test_rrd_can_be_built_from_the_mcap(tmp_path):
+    """Episodes recorded MCAP-only (RecordingConfig(write_rrd=False)) still get a Rerun file on demand."""
+    from hexbench.recording import RecordingConfig
+    from hexbench.recording.rrd_from_mcap import rrd_from_mcap
+
+    env = HexapodEnv(terrain="stairs", level=4.0, max_steps=40)
+    env.reset(seed=2)
+    rec = make_episode_recorder(tmp_path, "stairs-4cm-00", META, RecordingConfig(write_rrd=False))
+    rec.on_reset(env)
+    while True:
+        obs, reward, terminated, truncated, info = env.step(np.zeros(18))
+        rec.on_step(env, obs, np.zeros(18), reward, info)
+        if terminated or truncated:
+            break
+    files = rec.on_end({"steps": 40})
+    env.close()
+    assert set(files) == {"mcap_path", "mcap_sha256"} and [p.name for p in tmp_path.iterdir()] == ["stairs-4cm-00.mcap"]
+    rrd = rrd_from_mcap(tmp_path / files["mcap_path"], tmp_path / "stairs-4cm-00.rrd")
+    verify_rrd(rrd)
+    printed = subprocess.run([str(Path(sys.executable).with_name("rerun")), "rrd", "print", str(rrd)],
+                             capture_output=True, text=True, timeout=60, env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
+    assert '"stairs-4cm-00"' in printed and "/joints/LF_ankle" in printed and "/world/terrain" in printed
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["stairs-4cm-00.mcap", "stairs-4cm-00.rrd"]

@@ -116,7 +116,9 @@ def register(app: typer.Typer) -> None:
         episode: str = typer.Argument(..., help="an episode's .mcap or .rrd file"),
         summary: bool = typer.Option(False, "--summary", help="print a text summary instead of opening a viewer"),
     ) -> None:
-        """Open a logged episode in the Rerun viewer (or print a summary with --summary)."""
+        """Open a logged episode in the Rerun viewer (or print a summary with --summary).
+
+        An episode recorded without an .rrd gets one built from its .mcap first."""
         if summary:
             from hexbench.recording.reader import EpisodeFileError, summary_text
 
@@ -129,6 +131,15 @@ def register(app: typer.Typer) -> None:
         import subprocess
         import sys
 
+        p = Path(episode)
+        if p.suffix in (".mcap", ".rrd") and not p.with_suffix(".rrd").is_file() and p.with_suffix(".mcap").is_file():
+            from hexbench.recording.reader import EpisodeFileError
+            from hexbench.recording.rrd_from_mcap import rrd_from_mcap
+
+            try:  # recorded without an .rrd: build it from the MCAP once
+                rrd_from_mcap(p.with_suffix(".mcap"), p.with_suffix(".rrd"))
+            except (EpisodeFileError, OSError) as e:
+                _fail(f"cannot build the Rerun file from {p.with_suffix('.mcap')}: {e}")
         rrd = _episode_file(episode, ".rrd")
         exe = shutil.which("rerun") or str(Path(sys.executable).with_name("rerun"))
         if not Path(exe).exists():

@@ -89,6 +89,7 @@ class EpisodeRecorder:
         self.meta.setdefault("max_steps", cfg.max_steps)
         self.meta.setdefault("residual_scale", cfg.eps)
         self.meta.setdefault("control_dt_s", cfg.physics.control_dt_s)
+        self.meta.setdefault("goal_distance_m", cfg.goal_distance_m)
         self._capture.reset(env)
 
     def on_step(self, env, obs, action, reward, info) -> None:

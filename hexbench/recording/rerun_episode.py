@@ -115,10 +115,50 @@ def _static_archetypes(joints: tuple[JointFrame, ...], reward_term_names: tuple[
     return tuple(out)
 
 
+@dataclass(frozen=True)
+class RerunSeries:
+    """What the .rrd shows over time, already at the logged rate.
+
+    Robot rows (m): the reset state and every `every_n_steps`-th step; plot rows (p): the same
+    steps without the reset row (reward and its terms exist only after a step).
+    """
+
+    time_s: np.ndarray  # (m,) simulated time of the robot rows
+    joint_pos_rad: np.ndarray  # (m, 18)
+    base_pos_m: np.ndarray  # (m, 3)
+    base_quat_xyzw: np.ndarray  # (m, 4)
+    plot_time_s: np.ndarray  # (p,)
+    reward: np.ndarray  # (p,)
+    reward_term_names: tuple[str, ...]
+    reward_terms: np.ndarray  # (p, len(names))
+    progress_m: np.ndarray  # (p,)
+    lateral_m: np.ndarray  # (p,)
+    plot_base_pos_m: np.ndarray  # (p, 3)
+    plot_base_quat_xyzw: np.ndarray  # (p, 4)
+
+
+def series_from_episode(ep: EpisodeArrays, every_n_steps: int) -> RerunSeries:
+    n_rows = len(ep.time_ns)
+    rows = np.array(sorted(set(range(0, n_rows, every_n_steps)) | {n_rows - 1}))
+    steps = rows[rows > 0]
+    k = steps - 1
+    return RerunSeries(
+        time_s=ep.time_ns[rows] / 1e9, joint_pos_rad=ep.joint_pos_rad[rows], base_pos_m=ep.base_pos_m[rows],
+        base_quat_xyzw=ep.base_quat_xyzw[rows], plot_time_s=ep.time_ns[steps] / 1e9, reward=ep.reward[k],
+        reward_term_names=tuple(ep.reward_term_names), reward_terms=ep.reward_terms[k], progress_m=ep.progress_m[k],
+        lateral_m=ep.lateral_m[k], plot_base_pos_m=ep.base_pos_m[steps], plot_base_quat_xyzw=ep.base_quat_xyzw[steps])
+
+
 def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf: str, joints: list[JointFrame],
                       mesh: tuple[np.ndarray, np.ndarray], goal_x_m: float,
                       settings: RerunSettings = RerunSettings()) -> None:
     """Write the episode's .rrd to `path` (the caller renames it into place)."""
+    write_series_rrd(path, series_from_episode(ep, settings.every_n_steps), recording_id=recording_id, urdf=urdf,
+                     joints=joints, mesh=mesh, goal_x_m=goal_x_m)
+
+
+def write_series_rrd(path: Path, se: RerunSeries, *, recording_id: str, urdf: str, joints: list[JointFrame],
+                     mesh: tuple[np.ndarray, np.ndarray], goal_x_m: float) -> None:
     import rerun as rr
     import rerun_bindings
 
@@ -127,17 +167,14 @@ def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf:
     try:
         rec.send_recording_name(recording_id)
         rec.send_chunks(list(_urdf_chunks(urdf)))
-
-        n_rows = len(ep.time_ns)
-        rows = np.array(sorted(set(range(0, n_rows, settings.every_n_steps)) | {n_rows - 1}))
-        times = [rr.TimeColumn("sim_time", duration=ep.time_ns[rows] / 1e9)]
+        times = [rr.TimeColumn("sim_time", duration=se.time_s)]
 
         # robot: base pose and joint rotations over time, frames static
-        for entity, archetype in _static_archetypes(tuple(joints), tuple(ep.reward_term_names)):
+        for entity, archetype in _static_archetypes(tuple(joints), se.reward_term_names):
             rec.log(entity, archetype, static=True)
         rec.send_columns("/world/base", times, rr.Transform3D.columns(
-            translation=ep.base_pos_m[rows].astype(np.float32), quaternion=ep.base_quat_xyzw[rows].astype(np.float32)))
-        rot = joint_rotations(joints, ep.joint_pos_rad[rows]).astype(np.float32)
+            translation=se.base_pos_m.astype(np.float32), quaternion=se.base_quat_xyzw.astype(np.float32)))
+        rot = joint_rotations(joints, se.joint_pos_rad).astype(np.float32)
         for j, jf in enumerate(joints):
             rec.send_columns(f"/joints/{jf.name}", times, rr.Transform3D.columns(quaternion=rot[:, j]))
 
@@ -145,28 +182,27 @@ def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf:
         vertices, triangles = mesh
         rec.log("/world/terrain", rr.Mesh3D(vertex_positions=vertices.astype(np.float32), triangle_indices=triangles,
                                             albedo_factor=[140, 128, 108, 255]), static=True)
-        rec.log("/world/trajectory", rr.LineStrips3D([ep.base_pos_m[rows].astype(np.float32)], colors=[[230, 80, 30]],
+        rec.log("/world/trajectory", rr.LineStrips3D([se.base_pos_m.astype(np.float32)], colors=[[230, 80, 30]],
                                                      radii=0.004), static=True)
-        y0 = float(ep.base_pos_m[0, 1])
-        gx = float(ep.base_pos_m[0, 0]) + goal_x_m
+        y0 = float(se.base_pos_m[0, 1])
+        gx = float(se.base_pos_m[0, 0]) + goal_x_m
         gz = float(vertices[:, 2].max()) + 0.01
         rec.log("/world/goal", rr.LineStrips3D([[[gx, y0 - 0.8, gz], [gx, y0 + 0.8, gz]]], colors=[[40, 180, 60]],
                                                radii=0.006), static=True)
 
-        # plots (per-step quantities at the logged steps; row 0 is the reset state)
-        steps = rows[rows > 0]
-        k = steps - 1
-        step_times = [rr.TimeColumn("sim_time", duration=ep.time_ns[steps] / 1e9)]
-        rec.send_columns("/plots/reward", step_times, rr.Scalars.columns(scalars=ep.reward[k]))
-        names = list(ep.reward_term_names)
+        # plots
+        p = len(se.plot_time_s)
+        step_times = [rr.TimeColumn("sim_time", duration=se.plot_time_s)]
+        rec.send_columns("/plots/reward", step_times, rr.Scalars.columns(scalars=se.reward))
+        names = list(se.reward_term_names)
         if names:
             rec.send_columns("/plots/reward_terms", step_times,
-                             rr.Scalars.columns(scalars=ep.reward_terms[k]).partition([len(names)] * len(k)))
-        pos = np.stack([ep.progress_m[k], ep.lateral_m[k], ep.base_pos_m[steps, 2]], axis=1)
-        rec.send_columns("/plots/position_m", step_times, rr.Scalars.columns(scalars=pos).partition([3] * len(k)))
-        roll, pitch = _rpy_deg(ep.base_quat_xyzw[steps])
+                             rr.Scalars.columns(scalars=se.reward_terms).partition([len(names)] * p))
+        pos = np.stack([se.progress_m, se.lateral_m, se.plot_base_pos_m[:, 2]], axis=1)
+        rec.send_columns("/plots/position_m", step_times, rr.Scalars.columns(scalars=pos).partition([3] * p))
+        roll, pitch = _rpy_deg(se.plot_base_quat_xyzw)
         rec.send_columns("/plots/attitude_deg", step_times,
-                         rr.Scalars.columns(scalars=np.stack([roll, pitch], axis=1)).partition([2] * len(k)))
+                         rr.Scalars.columns(scalars=np.stack([roll, pitch], axis=1)).partition([2] * p))
         rec.flush()
     finally:
         rec.disconnect()
