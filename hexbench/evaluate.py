@@ -218,7 +218,8 @@ def validate_record(record: dict) -> None:
 
 
 def build_record(*, label: str, controller_file: str, action_mode: str, tasks: list[TaskSpec], rows: list[dict],
-                 started_at: str, wall_time_s: float, workers: int, command: str, checkpoints: list[dict]) -> dict:
+                 started_at: str, wall_time_s: float, workers: int, command: str, checkpoints: list[dict],
+                 commit: str) -> dict:
     units = {t.terrain: t.unit for t in tasks}
     headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     episode_fields = ("terrain", "level", "index", "seed", "success", "end_reason", "steps", "sim_time_s",
@@ -234,7 +235,7 @@ def build_record(*, label: str, controller_file: str, action_mode: str, tasks: l
         "kind": "measured",
         "controller": {"file": controller_file, "sha256": file_sha256(controller_file), "action_mode": action_mode,
                        "checkpoints": checkpoints},
-        "provenance": {"hexbench_version": hexbench.__version__, "git_commit": git_commit(), "command": command,
+        "provenance": {"hexbench_version": hexbench.__version__, "git_commit": commit, "command": command,
                        "machine": machine_info(), "started_at": started_at, "wall_time_s": wall_time_s,
                        "workers": workers},
         "levels": levels,
@@ -289,6 +290,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     todo = [j for j in jobs if j.episode_id not in done]
     written: list[Path] = []
     started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    commit = git_commit()  # the code that runs, taken before the first episode
     t0 = time.perf_counter()
 
     def _journal(job: EpisodeJob, row: dict) -> None:
@@ -341,7 +343,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     rows = [done[j.episode_id] for j in jobs]
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
                        started_at=started_at, wall_time_s=time.perf_counter() - t0, workers=workers,
-                       command=command, checkpoints=checkpoints)
+                       command=command, checkpoints=checkpoints, commit=commit)
     import pandas as pd
 
     table = pd.DataFrame(sorted(rows, key=lambda r: (r["terrain"], r["level"], r["index"])))

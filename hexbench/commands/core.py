@@ -47,28 +47,34 @@ def _parse_levels(text: str | None) -> list[float] | None:
 
 
 def print_success_table(record: dict, console) -> None:
-    """Per-terrain success rates laid out like paper Table 4, with 95% Wilson intervals."""
+    """Per-terrain success rates (paper Table 4's content, one row per level so it fits any
+    terminal), with 95% Wilson intervals, then the terrain summary."""
     from rich.table import Table
 
     from hexbench.tasks import format_level
 
     for terrain in record["terrains"]:
         name = terrain["terrain"]
-        rows = [lv for lv in record["levels"] if lv["terrain"] == name]
-        table = Table(title=f"{record['label']} on {name} (protocol {record['protocol']})", show_lines=False)
-        table.add_column(f"level ({terrain['unit']})", justify="right")
-        for lv in rows:
-            table.add_column(format_level(lv["level"]) + ("*" if lv["headroom"] else ""), justify="right")
-        table.add_row("success", *[f"{100 * lv['success_rate']:.0f}%" for lv in rows])
-        table.add_row("95% CI", *[f"{100 * lv['ci95_low']:.0f}-{100 * lv['ci95_high']:.0f}" for lv in rows])
-        table.add_row("speed m/s", *[f"{lv['mean_forward_speed_m_per_s']:.3f}" if lv["mean_forward_speed_m_per_s"]
-                                     is not None else "-" for lv in rows])
+        table = Table(title=f"{record['label']} on {name} (protocol {record['protocol']})")
+        for col in (f"level ({terrain['unit']})", "success", "95% CI", "episodes", "speed (m/s)", "max |y| (m)"):
+            table.add_column(col, justify="right")
+        for lv in (lv for lv in record["levels"] if lv["terrain"] == name):
+            speed, max_y = lv.get("mean_forward_speed_m_per_s"), lv.get("mean_max_abs_y_m")
+            table.add_row(
+                format_level(lv["level"]) + (" *" if lv["headroom"] else ""),
+                f"{100 * lv['success_rate']:.0f}%",
+                f"{100 * lv['ci95_low']:.0f}-{100 * lv['ci95_high']:.0f}%",
+                f"{lv['successes']}/{lv['episodes']}",
+                "-" if speed is None else f"{speed:.3f}",
+                "-" if max_y is None else f"{max_y:.2f}",
+            )
         console.print(table)
         hardest = terrain["hardest_level_passed"]
-        console.print(f"  hardest level passed (>= 80%): {format_level(hardest) if hardest is not None else 'none'}"
-                      f" {terrain['unit']}; AUC (paper levels) {terrain['auc']:.3f}"
+        console.print(f"  hardest level passed (>= 80%): "
+                      f"{format_level(hardest) + ' ' + terrain['unit'] if hardest is not None else 'none'}; "
+                      f"AUC over paper levels {terrain['auc']:.3f}"
                       + (f"; headroom AUC {terrain['headroom_auc']:.3f}" if terrain.get("headroom_auc") is not None else "")
-                      + "   (* = headroom level beyond paper Table 4)")
+                      + "  (* = headroom level beyond paper Table 4)", highlight=False)
 
 
 def _register_run(app: typer.Typer) -> None:
