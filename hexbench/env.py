@@ -254,10 +254,7 @@ class HexapodEnv(gym.Env):
     # ------------------------------------------------------------ observation
     def _observe(self, state) -> np.ndarray:
         obs = self._obs_buffer
-        obs[0:18] = state.joint_pos_rad
-        obs[18:36] = state.joint_vel_rad_per_s
-        obs[36:54] = state.joint_torque_nm
-        obs[54:57] = state.base_pos_m
+        obs[0:57] = state.values[0:57]  # joints (pos, vel, torque) and base xyz
         obs[57:60] = state.base_rpy_rad
         obs[60:62] = self.target_xy
         if self._noise_on:

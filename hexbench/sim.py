@@ -52,17 +52,28 @@ class PhysicsConfig:
         return self.physics_dt_s * self.substeps_per_control
 
 
-@dataclass
 class RobotState:
-    joint_pos_rad: np.ndarray  # (18,)
-    joint_vel_rad_per_s: np.ndarray  # (18,)
-    joint_torque_nm: np.ndarray  # (18,)
-    base_pos_m: np.ndarray  # (3,) world xyz
-    base_quat_xyzw: np.ndarray  # (4,)
-    base_rpy_rad: np.ndarray  # (3,) roll, pitch, yaw
-    up_z: float = 1.0  # z component of the body's up axis: cos of the body's tilt from vertical
-    client: int = -1
-    robot_id: int = -1
+    """The robot's state after a step, read in one go into one float64 vector.
+
+    Fields are views into that vector: joint_pos_rad, joint_vel_rad_per_s, joint_torque_nm
+    (18 each), base_pos_m (3, world), base_quat_xyzw (4), base_rpy_rad (3: roll, pitch, yaw);
+    up_z is the z component of the body's up axis (cos of its tilt from vertical).
+    """
+
+    __slots__ = ("values", "up_z", "client", "robot_id")
+
+    def __init__(self, values: np.ndarray, up_z: float, client: int = -1, robot_id: int = -1):
+        self.values = values
+        self.up_z = up_z
+        self.client = client
+        self.robot_id = robot_id
+
+    joint_pos_rad = property(lambda self: self.values[0:18])
+    joint_vel_rad_per_s = property(lambda self: self.values[18:36])
+    joint_torque_nm = property(lambda self: self.values[36:54])
+    base_pos_m = property(lambda self: self.values[54:57])
+    base_quat_xyzw = property(lambda self: self.values[57:61])
+    base_rpy_rad = property(lambda self: self.values[61:64])
 
     @property
     def base_lin_vel_m_per_s(self) -> np.ndarray:
@@ -143,17 +154,9 @@ class Simulation:
         c, r = self.client, self.robot_id
         q, qd, _, tau = zip(*p.getJointStates(r, self.joint_indices, physicsClientId=c))
         pos, quat = p.getBasePositionAndOrientation(r, physicsClientId=c)
-        return RobotState(
-            joint_pos_rad=np.array(q),
-            joint_vel_rad_per_s=np.array(qd),
-            joint_torque_nm=np.array(tau),
-            base_pos_m=np.array(pos),
-            base_quat_xyzw=np.array(quat),
-            base_rpy_rad=np.array(p.getEulerFromQuaternion(quat)),
-            up_z=1.0 - 2.0 * (quat[0] * quat[0] + quat[1] * quat[1]),
-            client=c,
-            robot_id=r,
-        )
+        rpy = p.getEulerFromQuaternion(quat)
+        return RobotState(np.array(q + qd + tau + pos + quat + rpy),
+                          1.0 - 2.0 * (quat[0] * quat[0] + quat[1] * quat[1]), c, r)
 
     def foot_contacts(self) -> np.ndarray:
         """Whether each foot (tibia link) touches anything: (6,) bool."""
