@@ -474,7 +474,7 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {
         "format": 1, "note": "shipped baseline weights: policy state_dict only (SB3 zip without pickled data); "
                              "written by `hexbench checkpoints publish`", "checkpoints": {}}
-    complete = chosen["env_steps"] >= run["total_steps"]
+    complete = run["env_steps"] >= run["total_steps"]  # the run reached its budget
     manifest["checkpoints"][key] = {
         "file": f"{key}.zip", "sha256": sha, "method": run["method"], "terrain": run["terrain"],
         "algo": run["config"]["algo"], "action_mode": run["config"]["action_mode"], "seed": run["seed"],
@@ -483,8 +483,9 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
         "wall_time_s": chosen["wall_time_s"], "workers": run["workers"],
         "hexbench_commit": run["hexbench_commit"], "baseline_sha256": run["baseline_sha256"],
         "source_checkpoint_sha256": chosen["sha256"], "complete": complete,
-        "status": ("complete run" if complete else
-                   f"PARTIAL run: best-so-far checkpoint at {chosen['env_steps']} of {run['total_steps']} env steps"),
+        "status": (f"checkpoint at {chosen['env_steps']} env steps ({which}) of a complete run of {run['env_steps']} steps"
+                   if complete else
+                   f"PARTIAL run: checkpoint ({which}) at {chosen['env_steps']} of {run['total_steps']} env steps"),
         "metrics_at_checkpoint": {k: chosen.get(k) for k in ("mean_episode_reward", "success_rate", "episodes",
                                                              "curriculum_level_mean", "curriculum_level_max")},
         "published_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
