@@ -23,7 +23,7 @@ import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from datetime import datetime, timezone
 from multiprocessing import get_context
 from pathlib import Path
@@ -346,21 +346,11 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
                        command=command, checkpoints=checkpoints, commit=commit)
     import pandas as pd
 
-    table = pd.DataFrame(sorted(rows, key=lambda r: (r["terrain"], r["level"], r["index"])))
-    table.insert(0, "episode_id", [f"{r['terrain']}-{format_level(r['level'])}{_unit(tasks, r['terrain'])}-{r['index']:02d}"
-                                   for _, r in table.iterrows()])
+    ordered = sorted(jobs, key=lambda j: (j.task.terrain, j.task.level, j.index))
+    table = pd.DataFrame([{"episode_id": j.episode_id, **done[j.episode_id]} for j in ordered])
     tmp = out / ".episodes.parquet.tmp"
     table.to_parquet(tmp, index=False)
     os.replace(tmp, out / "episodes.parquet")
     _atomic_write_text(out / "result.json", json.dumps(rec, indent=1, sort_keys=False) + "\n")
     return RunResult(rec, out)
 
-
-def _unit(tasks: list[TaskSpec], terrain: str) -> str:
-    return next(t.unit for t in tasks if t.terrain == terrain)
-
-
-def episode_job_dict(job: EpisodeJob) -> dict:
-    d = asdict(job)
-    d["task"] = asdict(job.task)
-    return d

@@ -38,6 +38,7 @@ class EpisodeJudge:
 
     def __init__(self, rules: EpisodeRules):
         self.rules = rules
+        self._min_up_z = rules.min_up_z  # once, not every step
         self._x_history: list[float] = []
 
     def reset(self) -> None:
@@ -46,7 +47,7 @@ class EpisodeJudge:
     def end_reason(self, *, step: int, progress_m: float, lateral_m: float, up_z: float) -> str | None:
         """The reason the episode ends after control step `step` (1-based), or None to go on."""
         r = self.rules
-        if up_z < r.min_up_z:
+        if up_z < self._min_up_z:
             return "fall"
         if abs(lateral_m) > r.max_lateral_deviation_m:
             return "lateral_deviation"

@@ -8,7 +8,6 @@ max_speed * dt per control step towards the requested angle).
 
 from __future__ import annotations
 
-import math
 import os
 import tempfile
 from dataclasses import dataclass
@@ -185,7 +184,3 @@ class Simulation:
         except Exception:
             pass
 
-
-def tilt_deg(state: RobotState) -> float:
-    """Angle between the body's up axis and world up [deg]."""
-    return math.degrees(math.acos(max(-1.0, min(1.0, state.up_z))))
