@@ -30,6 +30,7 @@ class Config:
     n_epochs: int = 10  # SB3 default
     ent_coef: float = 0.0
     log_std_init: float = -1.0  # not in the paper: std 0.37 (SB3 default 1.0 would shake the CPG gait apart)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
 
 
 CONFIG = Config()

@@ -31,6 +31,7 @@ class Config:
     ent_coef: str = "auto"  # SB3 default: entropy temperature learned
     log_std_init: float = -1.0  # not in the paper; same initial exploration as the PPO baselines
     action_noise_std: float = 0.0  # SAC explores through its stochastic policy
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
 
 
 CONFIG = Config()

@@ -32,6 +32,7 @@ class Config:
     target_policy_noise: float = 0.2  # SB3 default
     target_noise_clip: float = 0.5  # SB3 default
     action_noise_std: float = 0.1  # Gaussian exploration noise on the [-1, 1] action (SB3 adds none by default)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
 
 
 CONFIG = Config()

@@ -28,7 +28,7 @@ import numpy as np
 
 from hexbench.cpg import CPGParams, HopfCPG
 from hexbench.protocol import EpisodeJudge, EpisodeRules
-from hexbench.rewards import TABLE1_WEIGHTS, difficulty_factor, reward_terms, total_reward
+from hexbench.rewards import TABLE1_WEIGHTS, difficulty_factor, early_end_penalty, reward_terms, total_reward
 from hexbench.robot import NUM_JOINTS, JetHexaSpec
 from hexbench.sim import PhysicsConfig, Simulation
 from hexbench.terrain import TERRAIN_KINDS, make_terrain
@@ -99,6 +99,7 @@ class EnvConfig:
     max_lateral_deviation_m: float = 0.8
     fall_tilt_deg: float = 60.0
     stall_window_s: float | None = None  # None: no stall rule
+    early_end_penalty: bool = False  # training option, see hexbench.rewards.early_end_penalty
     stall_min_progress_m: float = 0.05
     init_xy_jitter_m: float = 0.02  # uniform +- start position perturbation
     init_yaw_jitter_rad: float = 0.05  # uniform +- start heading perturbation
@@ -225,6 +226,8 @@ class HexapodEnv(gym.Env):
             base_height_cm=100.0 * z, step_limit_exceeded=truncated,
         )
         reward = total_reward(terms, self._weights, self._delta)
+        if terminated and cfg.early_end_penalty and reason != "success":
+            reward += (1.0 + self._delta) * early_end_penalty(self._weights)
         if reason == "success" and cfg.curriculum is not None:
             self._count_curriculum_success()
         info = {

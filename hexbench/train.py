@@ -140,7 +140,7 @@ class TrainingWrapper(gym.ObservationWrapper):
 
 
 def make_training_env(terrain: str, action_mode: str, residual_scale: float | None,
-                      fixed_level: float | None = None) -> gym.Env:
+                      fixed_level: float | None = None, early_end_penalty: bool = False) -> gym.Env:
     """The curriculum env of paper 4.1 (or, with fixed_level, that level alone), noise on, monitored."""
     from stable_baselines3.common.monitor import Monitor
 
@@ -148,17 +148,19 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
     from hexbench.tasks import curriculum_config
 
     if fixed_level is None:
-        config = curriculum_config(terrain, action_mode, residual_scale=residual_scale)
+        config = curriculum_config(terrain, action_mode, residual_scale=residual_scale,
+                                   early_end_penalty=early_end_penalty)
     else:
-        config = EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode, residual_scale=residual_scale)
+        config = EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode, residual_scale=residual_scale,
+                           early_end_penalty=early_end_penalty)
     return TrainingWrapper(Monitor(HexapodEnv(config)))
 
 
 def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
-                 fixed_level: float | None = None):
+                 fixed_level: float | None = None, early_end_penalty: bool = False):
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
 
-    factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level)
+    factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty)
                  for _ in range(workers)]
     if workers == 1:
         return DummyVecEnv(factories)
@@ -358,7 +360,7 @@ def train(settings: TrainSettings) -> dict:
     write_json_atomic(run_dir / "run.json", run)
 
     venv = make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale,
-                        settings.fixed_level)
+                        settings.fixed_level, getattr(config, "early_end_penalty", False))
     cls = algo_class(config.algo)
     if run["checkpoints"]:
         last = run["checkpoints"][-1]
