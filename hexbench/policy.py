@@ -38,7 +38,7 @@ ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
-                                           "log_std_init", "action_noise_std"})
+                                           "log_std_init", "action_noise_std", "early_end_penalty"})
 MANIFEST_NAME = "manifest.json"
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
