@@ -124,9 +124,11 @@ def test_every_mcap_channel_reads_back_with_crc_validation(episode):
     pose = PoseInFrame.FromString(seen["/base_pose"][-1][1].data)
     assert pose.pose.position.x == pytest.approx(tf.transforms[0].translation.x)
 
-    # /metrics: one JSON object per step, valid against the channel's own JSON schema
+    # /metrics: one JSON object every 2nd step and at the last step, valid against the channel's own JSON schema
     rows = [json.loads(m.data) for _, m in seen["/metrics"]]
-    assert len(rows) == SHORT_STEPS and [r["step"] for r in rows] == list(range(1, SHORT_STEPS + 1))
+    assert [r["step"] for r in rows] == list(range(2, SHORT_STEPS, 2)) + [SHORT_STEPS]
+    assert [m.log_time for _, m in seen["/metrics"]] == [r["step"] * dt_ns for r in rows]
+    assert "every 2 steps" in meta["recording"]["metrics"]
     schema = json.loads(seen["/metrics"][0][0].data)
     assert schema == json.loads(json.dumps(METRICS_SCHEMA))
     for r in rows:
@@ -149,9 +151,12 @@ def test_logged_numbers_match_the_simulation(episode):
                          env.sim.foot_contacts()))
     env.close()
     rows = metrics(out / files["mcap_path"])
-    assert len(rows) == len(expected)
-    for row, (reward, a_c, progress, phases, contacts) in zip(rows, expected):
+    assert len(rows) == SHORT_STEPS // 2 + 1
+    returns = np.cumsum([e[0] for e in expected])
+    for row in rows:
+        reward, a_c, progress, phases, contacts = expected[row["step"] - 1]
         assert row["reward"] == pytest.approx(reward, rel=1e-4, abs=1e-9)
+        assert row["return"] == pytest.approx(returns[row["step"] - 1], rel=1e-4, abs=1e-9)
         assert np.allclose(row["a_c"], a_c, atol=5e-4)
         assert row["progress_m"] == pytest.approx(progress, rel=1e-4, abs=1e-6)
         assert np.allclose(row["phases_rad"], phases, atol=5e-4)
@@ -249,15 +254,18 @@ def _rewrite_with_changed_metric(src: Path, dst: Path, step: int) -> None:
                        for cid, c in summary.channels.items()}
         for m in reader.iter_metadata():
             w.add_metadata(m.name, m.metadata)
+        found = False
         for _, channel, msg in reader.iter_messages(log_time_order=True):
             data = msg.data
             if channel.topic == "/metrics":
                 row = json.loads(data)
                 if row["step"] == step:
                     row["reward"] += 0.5
+                    found = True
                     data = json.dumps(row).encode()
             w.add_message(channel_ids[msg.channel_id], msg.log_time, data, msg.publish_time)
         w.finish()
+    assert found, f"step {step} is not in /metrics"
 
 
 def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
@@ -268,11 +276,11 @@ def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
     assert "match the re-simulation exactly" in ok.output
 
     tampered = tmp_path / "tampered.mcap"
-    _rewrite_with_changed_metric(path, tampered, step=17)
+    _rewrite_with_changed_metric(path, tampered, step=18)  # /metrics logs steps 2, 4, ...: message 8
     check_integrity(tampered)  # a consistent file: only re-simulation can tell
     bad = runner.invoke(app, ["verify", str(tampered)])
     assert bad.exit_code == 1
-    assert "/metrics message 16" in bad.output and "differs from the re-simulation" in bad.output
+    assert "/metrics message 8" in bad.output and "differs from the re-simulation" in bad.output
 
     flipped = tmp_path / "flipped.mcap"
     data = bytearray(path.read_bytes())

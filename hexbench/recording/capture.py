@@ -34,7 +34,8 @@ class EpisodeArrays:
     a_r: np.ndarray  # (n, 18) policy part [rad]
     a_t: np.ndarray  # (n, 18) joint targets sent [rad]
     phases_rad: np.ndarray  # (n, 6) oscillator phases
-    foot_contacts: np.ndarray  # (n, 6) bool
+    contact_steps: np.ndarray  # (c,) int64, the 1-based steps at which the foot contacts were queried
+    foot_contacts: np.ndarray  # (c, 6) bool, at `contact_steps` (not every step: the query is the costly part)
     progress_m: np.ndarray  # (n,)
     lateral_m: np.ndarray  # (n,)
     end_reason: str | None
@@ -67,17 +68,31 @@ def sim_time_ns(steps: np.ndarray | int, control_dt_s: float) -> np.ndarray:
     return np.asarray(steps, dtype=np.int64) * np.int64(round(control_dt_s * 1e9))
 
 
+def sampled_steps(num_steps: int, every_n_steps: int) -> np.ndarray:
+    """The 1-based steps logged at a reduced rate: every n-th step and always the last one."""
+    every = max(1, int(every_n_steps))
+    steps = np.arange(every, num_steps + 1, every, dtype=np.int64)
+    if num_steps and (not len(steps) or steps[-1] != num_steps):
+        steps = np.append(steps, np.int64(num_steps))
+    return steps
+
+
 class EpisodeCapture:
     """Collects an episode from the environment (see module docstring).
 
     It keeps references, not copies, of what the env returns (fresh arrays every step: the
-    state, a_c, a_r, the sent targets); only the caller's action is copied.
+    state, a_c, a_r, the sent targets); only the caller's action is copied. The foot contacts
+    (a PyBullet query, most of the per-step cost) are queried only every `contacts_every_n_steps`
+    steps and on the step that ends the episode (its info has an `end_reason`): the steps that
+    the per-step metrics are logged at.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, contacts_every_n_steps: int = 1) -> None:
         self._state: list = []
         self._steps: list[tuple] = []
+        self._contacts: list[tuple[int, frozenset]] = []
         self._foot_links: tuple[int, ...] = ()
+        self._every = max(1, int(contacts_every_n_steps))
         self.control_dt_s = 1.0 / 60.0
 
     def reset(self, env) -> None:
@@ -85,14 +100,18 @@ class EpisodeCapture:
         self._foot_links = tuple(env.sim.foot_link_indices)
         self._state = [env.robot_state]
         self._steps = []
+        self._contacts = []
 
     def step(self, env, action, reward, info) -> None:
         # Only references to what the env made fresh this step, plus the contact query: the rest
         # (phases from the oscillator state z, contacts per foot, the info fields) is unpacked
         # once, vectorised, in arrays().
         self._state.append(env.robot_state)
-        self._steps.append((float(reward), info, np.array(action, dtype=np.float64), env.cpg.z,
-                            touching_links(env.sim)))
+        steps = self._steps
+        steps.append((float(reward), info, np.array(action, dtype=np.float64), env.cpg.z))
+        k = len(steps)
+        if k % self._every == 0 or info.get("end_reason") is not None:
+            self._contacts.append((k, touching_links(env.sim)))
 
     def arrays(self) -> EpisodeArrays:
         states = self._state
@@ -121,7 +140,9 @@ class EpisodeCapture:
             a_r=stack([i["a_r"] for i in infos], len(JOINT_NAMES)),
             a_t=stack([i["a_t"] for i in infos], len(JOINT_NAMES)),
             phases_rad=np.angle(np.array([st[3] for st in steps])).reshape(n, -1) if n else np.zeros((0, 6)),
-            foot_contacts=stack([[f in st[4] for f in feet] for st in steps], len(FOOT_LINK_NAMES), dtype=bool),
+            contact_steps=np.array([c[0] for c in self._contacts], dtype=np.int64),
+            foot_contacts=np.array([[f in c[1] for f in feet] for c in self._contacts],
+                                   dtype=bool).reshape(len(self._contacts), len(FOOT_LINK_NAMES)),
             progress_m=np.array([i["progress_m"] for i in infos], dtype=np.float64).reshape(n),
             lateral_m=np.array([i["lateral_m"] for i in infos], dtype=np.float64).reshape(n),
             end_reason=infos[-1].get("end_reason") if n else None,

@@ -15,11 +15,27 @@ from __future__ import annotations
 import struct
 from typing import Sequence
 
+import numpy as np
+from mcap.opcode import Opcode
 from mcap.records import MessageIndex
 
 _MESSAGE_HEADER = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish
 _MESSAGE_OPCODE = 0x05
 _FIXED_LENGTH = 2 + 4 + 8 + 8
+
+
+class _BulkMessageIndex(MessageIndex):
+    """A MessageIndex written with one numpy conversion instead of two struct packs per entry
+    (the writer's own loop costs ~3 us per message). Same bytes: channel id, byte length of the
+    entries, then (log time, offset) as little-endian uint64 pairs."""
+
+    def write(self, stream) -> None:
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write2(self.channel_id)
+        stream.write4(len(self.records) * 16)
+        if self.records:
+            stream.write(np.asarray(self.records, dtype="<u8").tobytes())
+        stream.finish_record()
 
 
 def add_messages(writer, channel_id: int, log_times_ns: Sequence[int], datas: Sequence[bytes]) -> None:
@@ -33,7 +49,7 @@ def add_messages(writer, channel_id: int, log_times_ns: Sequence[int], datas: Se
         return
     index = chunk.message_indices.get(channel_id)
     if not index:
-        index = chunk.message_indices[channel_id] = MessageIndex(channel_id=channel_id, records=[])
+        index = chunk.message_indices[channel_id] = _BulkMessageIndex(channel_id=channel_id, records=[])
     buffer.seek(0, 2)
     pos = buffer.tell()
     pack = _MESSAGE_HEADER.pack

@@ -9,7 +9,8 @@ so the same episode always gives the same bytes):
   /base_pose          foxglove.PoseInFrame: the base in frame "world"            } every `tf_every_n_steps`
   /tf                 foxglove.FrameTransforms: world -> base and parent -> child } steps and at the
                       link of each joint                                          } last step
-  /metrics            JSON (jsonschema): per-step reward and Table 1 terms, the controller's
+  /metrics            JSON (jsonschema): every `metrics_every_n_steps` steps and at the last step,
+                      that step's reward, the return so far, Table 1 terms, the controller's
                       action, a_c, a_r, a_t, oscillator phases, foot contacts, progress, lateral
 plus the URDF as an attachment (robot.urdf) and metadata records "episode" (task, seed,
 controller, versions), "outcome" (the episode's result row) and "recording" (rates, precision).
@@ -44,7 +45,8 @@ class McapPrecision:
     joint_torque_bits: int = 8  # 2^-8 N m ~ 0.004 N m
     base_position_bits: int = 14  # 2^-14 m ~ 0.06 mm
     rotation_bits: int = 12  # quaternion components
-    joint_states_every_n_steps: int = 3  # /joint_states at 20 Hz (60 Hz control)
+    joint_states_every_n_steps: int = 6  # /joint_states at 10 Hz (60 Hz control), with /tf; keeps 4000 steps < 1 MB
+    metrics_every_n_steps: int = 2  # /metrics at 30 Hz (and the last step); the foot-contact query runs only then
     tf_every_n_steps: int = 6  # /tf and /base_pose at 10 Hz (Foxglove interpolates transforms)
     chunk_size_bytes: int = 8 * 1024 * 1024  # the whole episode in one chunk, channels grouped: best compression
 
@@ -58,7 +60,9 @@ METRICS_SCHEMA = {
     "properties": {
         "step": {"type": "integer", "description": "control step, 1-based"},
         "sim_time_s": {"type": "number", "description": "5 significant digits; the log time is exact"},
-        "reward": {"type": "number", "description": "R' = (1 + delta) R (eqs 7-8)"},
+        "reward": {"type": "number", "description": "R' = (1 + delta) R (eqs 7-8) of this step"},
+        "return": {"type": "number", "description": "sum of the rewards of steps 1..step (every step counted, "
+                                                    "also those not logged)"},
         "reward_terms": {"type": "object", "additionalProperties": {"type": "number"},
                          "description": "unweighted Table 1 terms"},
         "progress_m": {"type": "number"}, "lateral_m": {"type": "number"},
@@ -70,7 +74,7 @@ METRICS_SCHEMA = {
         "foot_contacts": {"type": "array", "items": {"type": "boolean"}},
         "end_reason": {"type": ["string", "null"]},
     },
-    "required": ["step", "sim_time_s", "reward", "reward_terms", "action", "a_c", "a_r", "a_t", "phases_rad",
+    "required": ["step", "sim_time_s", "reward", "return", "reward_terms", "action", "a_c", "a_r", "a_t", "phases_rad",
                  "foot_contacts", "end_reason"],
 }
 
@@ -227,7 +231,8 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
                         f"2^-{precision.joint_velocity_bits} rad/s, effort 2^-{precision.joint_torque_bits} N m",
         "base_pose": f"every {precision.tf_every_n_steps} steps and the last step; position 2^-{precision.base_position_bits} m, orientation 2^-{precision.rotation_bits}",
         "tf": f"every {precision.tf_every_n_steps} steps and the last step",
-        "metrics": "every step; arrays to 3 decimals, scalars to 5 significant digits",
+        "metrics": f"every {precision.metrics_every_n_steps} steps and the last step (field step says which); "
+                   "arrays to 3 decimals, scalars to 5 significant digits; return sums every step's reward",
         "steps": str(ep.num_steps),
     })
 
@@ -262,25 +267,31 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
     tf_data = _frame_transforms_messages([ts_fields[r] for r in rows], parts)
     add_messages(writer, ch["/tf"], t_rows, tf_data)
 
-    # /metrics: one JSON object per step, each made by one %-format of a row of pre-formatted cells
-    n = ep.num_steps
-    scalars = np.column_stack([ep.time_ns[1:] / 1e9, ep.reward, ep.reward_terms, ep.progress_m, ep.lateral_m])
+    # /metrics: one JSON object per logged step (every `metrics_every_n_steps` steps and the last,
+    # the steps the capture queried foot contacts at), each made by one %-format of a row of
+    # pre-formatted cells
+    k = ep.contact_steps - 1  # 0-based indices of the logged steps
+    n = len(k)
+    ret = np.cumsum(ep.reward)[k]
+    scalars = np.column_stack([ep.time_ns[k + 1] / 1e9, ep.reward[k], ret, ep.reward_terms[k], ep.progress_m[k],
+                               ep.lateral_m[k]])
     if not np.all(np.isfinite(scalars)):
         raise ValueError("cannot log NaN or infinite reward, progress or lateral values")
-    arrays = [("action", json_number_cells(ep.action)), ("a_c", json_number_cells(ep.a_c)),
-              ("a_r", json_number_cells(ep.a_r)), ("a_t", json_number_cells(ep.a_t)),
-              ("phases_rad", json_number_cells(ep.phases_rad)), ("foot_contacts", json_bool_cells(ep.foot_contacts))]
-    terms = ",".join(f"{json.dumps(k)}:%.5g" for k in ep.reward_term_names)
-    template = ('{"step":%d,"sim_time_s":%.5g,"reward":%.5g,"reward_terms":{' + terms + '},"progress_m":%.5g,'
-                '"lateral_m":%.5g,' + ",".join(f'"{name}":[' + ",".join(["%s"] * cells.shape[1]) + "]"
-                                               for name, cells in arrays) + ',"end_reason":%s}')
+    arrays = [("action", json_number_cells(ep.action[k])), ("a_c", json_number_cells(ep.a_c[k])),
+              ("a_r", json_number_cells(ep.a_r[k])), ("a_t", json_number_cells(ep.a_t[k])),
+              ("phases_rad", json_number_cells(ep.phases_rad[k])), ("foot_contacts", json_bool_cells(ep.foot_contacts))]
+    terms = ",".join(f"{json.dumps(name)}:%.5g" for name in ep.reward_term_names)
+    template = ('{"step":%d,"sim_time_s":%.5g,"reward":%.5g,"return":%.5g,"reward_terms":{' + terms + '},'
+                '"progress_m":%.5g,"lateral_m":%.5g,'
+                + ",".join(f'"{name}":[' + ",".join(["%s"] * cells.shape[1]) + "]" for name, cells in arrays)
+                + ',"end_reason":%s}')
     end_reasons = np.full((n, 1), "null", dtype=object)
-    if n:
+    if n and ep.contact_steps[-1] == ep.num_steps:
         end_reasons[-1, 0] = json.dumps(ep.end_reason)
-    cells = np.concatenate([np.arange(1, n + 1, dtype=object)[:, None], scalars.astype(object)]
+    cells = np.concatenate([ep.contact_steps.astype(object)[:, None], scalars.astype(object)]
                            + [c for _, c in arrays] + [end_reasons], axis=1)
     texts = [(template % tuple(row)).encode() for row in cells.tolist()]
-    add_messages(writer, ch["/metrics"], t[1:], texts)
+    add_messages(writer, ch["/metrics"], ep.time_ns[k + 1].tolist(), texts)
 
     writer.add_metadata("outcome", {k: json.dumps(v) for k, v in sorted(outcome.items())})
     writer.finish()

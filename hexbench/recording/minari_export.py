@@ -73,8 +73,10 @@ def export_run(run_dir: Path, dataset_id: str | None = None) -> Path:
                     truncations.append(bool(truncated))
                     if terminated or truncated:
                         break
-                logged = [m["reward"] for m in metrics(f)]
-                if len(logged) != len(rewards) or any(float(f"{r:.5g}") != lr for r, lr in zip(rewards, logged)):
+                # /metrics logs every 2nd step and the last one; compare the steps it has, and the count
+                logged = {m["step"]: m["reward"] for m in metrics(f)}
+                if max(logged, default=0) != len(rewards) or any(
+                        float(f"{rewards[k - 1]:.5g}") != lr for k, lr in logged.items()):
                     raise ValueError(f"{f}: the replayed episode differs from its log; not exported")
                 buffers.append(EpisodeBuffer(id=len(buffers), seed=seed, observations=np.array(observations),
                                              actions=np.array(actions), rewards=rewards, terminations=terminations,

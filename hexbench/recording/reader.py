@@ -99,11 +99,15 @@ def summary_text(path: str | Path) -> str:
         lines.append(f"outcome: {o.get('end_reason')} after {o.get('steps')} steps ({o.get('sim_time_s', 0):.2f} s), "
                      f"progress {o.get('progress_m', 0):.3f} m, max |y| {o.get('max_abs_y_m') or 0:.3f} m")
     if rows:
-        reward = np.array([r["reward"] for r in rows])
         contacts = np.array([r["foot_contacts"] for r in rows], dtype=float)
-        lines.append(f"reward: total {reward.sum():.2f}, mean {reward.mean():.3f} per step")
+        last = rows[-1]
+        if "return" in last:  # the return covers every step, also those /metrics does not log
+            lines.append(f"reward: total {last['return']:.2f}, mean {last['return'] / last['step']:.3f} per step")
+        else:
+            reward = np.array([r["reward"] for r in rows])
+            lines.append(f"reward: total {reward.sum():.2f}, mean {reward.mean():.3f} per step")
         legs = ("RF", "RM", "RB", "LB", "LM", "LF")
-        lines.append("foot contact (fraction of steps): "
+        lines.append("foot contact (fraction of logged steps): "
                      + ", ".join(f"{leg} {v:.2f}" for leg, v in zip(legs, contacts.mean(axis=0))))
     lines.append("channels: " + ", ".join(f"{t} {n}" for t, n in sorted(log.message_counts.items())))
     lines.append(f"attachments: {', '.join(log.attachments) or 'none'}")

@@ -61,7 +61,7 @@ class EpisodeRecorder:
         self.episode_id = episode_id
         self.meta = {**meta, "episode_id": episode_id}
         self.config = config
-        self._capture = EpisodeCapture()
+        self._capture = EpisodeCapture(config.mcap.metrics_every_n_steps)
         self._static: dict | None = None
         self._tmp_paths: list[Path] = []
 
@@ -134,7 +134,7 @@ class EpisodeRecorder:
             except FileNotFoundError:
                 pass
         self._tmp_paths.clear()
-        self._capture = EpisodeCapture()
+        self._capture = EpisodeCapture(self.config.mcap.metrics_every_n_steps)
 
 
 def make_episode_recorder(out_dir: Path, episode_id: str, meta: dict,
