@@ -11,8 +11,13 @@ is reported from the medians over the repeats, both as CPU time of this process
 shared machine both ratios move by +-10% between runs of identical work, so the recorder's own
 CPU time is also measured directly (each on_reset / on_step / on_end call timed) and reported
 as a fraction of the unrecorded evaluation's CPU time: the steadier figure.
-Bytes per episode (.mcap, .rrd, both) come from the recorded run's files. The issue's targets
-are a time ratio <= 1.05 and <= 1 MB per episode for both files together.
+Bytes per episode (.mcap, .rrd, both) come from the recorded run's files. The worst case for
+size is an episode that runs to the step limit (4000 steps): the bench also drives the recorder
+directly for `--long-steps` steps on rough 6 cm with the goal moved out of reach (and no
+lateral-deviation or fall end), once with the open-loop CPG (zero residual) and once with a
+white-noise residual (sigma 0.3, a pessimistic stand-in for a learned policy: noisy actions
+compress worst), and reports those files' bytes. The issue's targets are a time ratio <= 1.05
+and <= 1 MB per episode for both files together.
 
     python bench/record_overhead.py                              # one level per terrain, 2 episodes each
     python bench/record_overhead.py --full --repeats 1           # the whole protocol v1 (long)
@@ -23,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import statistics
 import sys
@@ -87,6 +93,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--episodes", type=int, default=2, help="episodes per level (default 2)")
     ap.add_argument("--full", action="store_true", help="the whole protocol v1 (all levels, 20 episodes each)")
     ap.add_argument("--repeats", type=int, default=2, help="runs of each configuration (default 2)")
+    ap.add_argument("--long-steps", type=int, default=4000,
+                    help="also record episodes of this many steps for their size (default 4000, 0: skip)")
     ap.add_argument("--json", help="also write the results to this JSON file")
     args = ap.parse_args(argv)
 
@@ -147,7 +155,10 @@ def main(argv: list[str] | None = None) -> int:
             "total_per_1000_steps": 1000 * sum(totals) / n_steps,
         },
         "per_episode": [{**s, "steps": steps.get(_row_key(s["episode"]), None)} for s in sizes],
+        "load_average": list(os.getloadavg()),
     }
+    if args.long_steps:
+        result["long_episodes"] = [_long_episode(args.long_steps, noise) for noise in (0.0, 0.3)]
     b = result["bytes_per_episode"]
     print(f"tasks {', '.join(result['tasks'])}; {len(sizes)} episodes, {n_steps} control steps, {args.repeats} repeats")
     print(f"CPU time   no record {cpu_plain:8.2f} s   record {cpu_rec:8.2f} s   ratio {cpu_rec / cpu_plain:.3f}")
@@ -160,6 +171,11 @@ def main(argv: list[str] | None = None) -> int:
     for e in result["per_episode"]:
         print(f"  {e['episode']:<16} {e['steps'] or '?':>5} steps  mcap {e['mcap_bytes'] / 1e3:6.0f} kB  "
               f"rrd {e['rrd_bytes'] / 1e3:6.0f} kB")
+    for e in result.get("long_episodes", []):
+        print(f"{e['steps']}-step episode, rough 6 cm, goal out of reach, residual noise sigma {e['residual_noise']:g}: "
+              f"mcap {e['mcap_bytes'] / 1e3:.0f} kB  rrd {e['rrd_bytes'] / 1e3:.0f} kB  "
+              f"both {(e['mcap_bytes'] + e['rrd_bytes']) / 1e3:.0f} kB")
+    print("load average (1, 5, 15 min) at the end: " + ", ".join(f"{v:.2f}" for v in result["load_average"]))
     if args.json:
         Path(args.json).write_text(json.dumps(result, indent=1) + "\n")
     return 0
@@ -184,6 +200,37 @@ def _warm_up() -> None:
                 break
         rec.on_end({"steps": 20})
     env.close()
+
+
+def _long_episode(steps: int, noise: float) -> dict:
+    """Record one `steps`-step episode (goal out of reach, no lateral or fall end) and return its bytes."""
+    import numpy as np
+
+    from hexbench.env import HexapodEnv
+    from hexbench.recording import make_episode_recorder
+
+    env = HexapodEnv(terrain="rough", level=6.0, max_steps=steps, goal_distance_m=1000.0,
+                     max_lateral_deviation_m=1000.0, fall_tilt_deg=180.0)
+    rng = np.random.default_rng(0)
+    with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
+        obs, _ = env.reset(seed=7)
+        rec = make_episode_recorder(Path(tmp), "rough-6cm-long", {"protocol": "v1", "terrain": "rough", "level": 6.0,
+                                                                  "unit": "cm", "index": 0, "seed": 7})
+        rec.on_reset(env)
+        n = 0
+        while True:
+            action = np.clip(noise * rng.standard_normal(18), -1.0, 1.0) if noise else np.zeros(18)
+            obs, reward, terminated, truncated, info = env.step(action)
+            n += 1
+            rec.on_step(env, obs, action, reward, info)
+            if terminated or truncated:
+                break
+        files = rec.on_end({"steps": n, "end_reason": info["end_reason"]})
+        out = {"steps": n, "end_reason": info["end_reason"], "residual_noise": noise,
+               "mcap_bytes": (Path(tmp) / files["mcap_path"]).stat().st_size,
+               "rrd_bytes": (Path(tmp) / files["rrd_path"]).stat().st_size}
+    env.close()
+    return out
 
 
 def _row_key(episode_id: str) -> str:
