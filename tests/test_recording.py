@@ -171,8 +171,45 @@ def test_rrd_passes_rerun_verify_and_carries_the_episode_id(episode):
     printed = subprocess.run([str(exe), "rrd", "print", str(path)], capture_output=True, text=True, timeout=60,
                              env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
     assert '"rough-6cm-00"' in printed  # recording id
-    for entity in ("/world/terrain", "/world/base", "/joints/RF_hip", "/plots/reward", "/jethexa/visual_geometries"):
+    for entity in ("/world/terrain", "/world/robot/links", "/world/robot/feet", "/plots/reward"):
         assert entity in printed
+
+
+def test_rerun_robot_poses_match_pybullet_links():
+    """The .rrd draws the robot by forward kinematics: each box and foot sits where PyBullet has its link."""
+    import pybullet as p
+
+    from hexbench.recording.kinematics import joint_frames, link_visuals
+    from hexbench.recording.rerun_episode import robot_poses
+
+    env = HexapodEnv(terrain="rough", level=6.0, max_steps=100)
+    env.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(37):
+        env.step(rng.uniform(-1, 1, 18))
+    sim, st = env.sim, env.robot_state
+    urdf = urdf_text(sim.robot_spec)
+    boxes, quats, spheres = robot_poses(urdf, joint_frames(urdf), st.base_pos_m[None], st.base_quat_xyzw[None],
+                                        st.joint_pos_rad[None])
+    index = {p.getJointInfo(sim.robot_id, i, physicsClientId=sim.client)[12].decode(): i
+             for i in range(p.getNumJoints(sim.robot_id, physicsClientId=sim.client))}
+    visuals = link_visuals(urdf)
+    expected = {"box": [], "sphere": []}
+    for v in visuals:
+        if v.link == "base":
+            pos, quat = p.getBasePositionAndOrientation(sim.robot_id, physicsClientId=sim.client)
+        else:
+            pos, quat = p.getLinkState(sim.robot_id, index[v.link], computeForwardKinematics=True,
+                                       physicsClientId=sim.client)[4:6]
+        rot = np.array(p.getMatrixFromQuaternion(quat)).reshape(3, 3)
+        expected[v.kind].append((np.array(pos) + rot @ np.array(v.origin_xyz_m), np.array(quat)))
+    env.close()
+    assert len(expected["box"]) == boxes.shape[1] == 19 and len(expected["sphere"]) == spheres.shape[1] == 6
+    for i, (pos, quat) in enumerate(expected["box"]):
+        assert np.allclose(boxes[0, i], pos, atol=1e-6)
+        assert min(np.abs(quats[0, i] - quat).max(), np.abs(quats[0, i] + quat).max()) < 1e-6
+    for i, (pos, _) in enumerate(expected["sphere"]):
+        assert np.allclose(spheres[0, i], pos, atol=1e-6)
 
 
 def test_same_episode_twice_gives_identical_mcap_bytes(tmp_path, episode):
@@ -453,5 +490,5 @@ def test_rrd_can_be_built_from_the_mcap(tmp_path):
     verify_rrd(rrd)
     printed = subprocess.run([str(Path(sys.executable).with_name("rerun")), "rrd", "print", str(rrd)],
                              capture_output=True, text=True, timeout=60, env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
-    assert '"stairs-4cm-00"' in printed and "/joints/LF_ankle" in printed and "/world/terrain" in printed
+    assert '"stairs-4cm-00"' in printed and "/world/robot/links" in printed and "/world/terrain" in printed
     assert sorted(p.name for p in tmp_path.iterdir()) == ["stairs-4cm-00.mcap", "stairs-4cm-00.rrd"]

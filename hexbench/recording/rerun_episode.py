@@ -1,23 +1,26 @@
 """One episode as a Rerun recording (.rrd) with a default blueprint: 3D view beside the plots.
 
-Contents (one timeline, `sim_time` (duration); no wall-clock timelines):
-  /jethexa/visual_geometries/**  the robot from its URDF (Rerun's own URDF loader, visual
-                                 geometry only), static
-  /joints/<joint>                parent link -> child link transform of each joint: frames and
-                                 origin static, rotation over time
-  /world/base                    world -> base transform over time (frame "tf#/world" -> "base")
+Contents (one timeline, `sim_time` (duration); no wall-clock timelines; all in world coordinates):
+  /world/robot/links             the robot's visual boxes from its URDF (base, coxa, femur, tibia):
+                                 sizes and colours static, centers and rotations over time
+  /world/robot/feet              the foot spheres: sizes and colours static, centers over time
   /world/terrain                 terrain mesh, static
   /world/trajectory              the base path over the whole episode, static
   /world/goal                    the goal line, static
   /plots/*                       reward, Table 1 reward terms, progress / lateral / height, roll / pitch
 Per-step data is logged every `every_n_steps` control steps (and at the last step): the .rrd is
-the visual companion; the MCAP file holds every step.
+the visual companion; the MCAP file is the full record.
+
+The robot is placed by forward kinematics here rather than drawn with Rerun's URDF loader and a
+transform per joint: every Rerun chunk carries its own Arrow schema (1.5-5 kB), and the loader's
+26 geometry entities plus 19 transform entities (two chunks each) cost ~200 kB per file, more
+than the robot's whole motion over a typical episode. Two entities hold the same boxes and
+spheres (tests/test_recording.py checks the poses against PyBullet's own link states).
 """
 
 from __future__ import annotations
 
 import os
-import tempfile
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -25,10 +28,9 @@ from pathlib import Path
 import numpy as np
 
 from hexbench.recording.capture import EpisodeArrays
-from hexbench.recording.kinematics import JointFrame, joint_rotations
+from hexbench.recording.kinematics import JointFrame, link_poses, link_visuals, quat_multiply, quat_rotate
 
 APPLICATION_ID = "hexbench"
-WORLD_FRAME = "tf#/world"
 
 
 @dataclass(frozen=True)
@@ -62,51 +64,44 @@ def blueprint():
 
 
 @lru_cache(maxsize=4)
-def _urdf_chunks(urdf: str) -> tuple:
-    """The robot's visual geometry from Rerun's URDF loader, one static chunk per entity.
+def _robot_geometry(urdf: str) -> tuple:
+    """The robot's visual boxes and spheres (from the URDF) as arrays, built once per process."""
+    visuals = link_visuals(urdf)
+    out = []
+    for kind in ("box", "sphere"):
+        vs = [v for v in visuals if v.kind == kind]
+        out.append((tuple(v.link for v in vs), np.array([v.origin_xyz_m for v in vs]).reshape(-1, 3),
+                    np.array([v.origin_quat_xyzw for v in vs]).reshape(-1, 4),
+                    np.array([v.half_size_m for v in vs], dtype=np.float32).reshape(-1, 3),
+                    np.array([np.round(np.array(v.rgba) * 255) for v in vs], dtype=np.uint8).reshape(-1, 4)))
+    return tuple(out)
 
-    The loader emits three single-row chunks per geometry (pose, frame, shape); every chunk
-    carries ~1.5 KB of Arrow schema, so the columns of each entity are merged into one chunk
-    (the same rows and values), which makes the static robot ~40% smaller.
-    """
-    import pyarrow as pa
-    import rerun.urdf as rru
-    from rerun.chunk import Chunk
 
-    fd, path = tempfile.mkstemp(suffix=".urdf", prefix="hexbench_rrd_")
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(urdf)
-        tree = rru.UrdfTree.from_file_path(path)
-        chunks = tree.stream(include_joint_transforms=False).drop(
-            content=f"/{tree.name}/collision_geometries/**").to_chunks()
-    finally:
-        os.unlink(path)
-    groups: dict[str, list] = {}
-    for c in chunks:
-        groups.setdefault(c.entity_path, []).append(c.to_record_batch())
-    merged = []
-    for batches in groups.values():
-        if len(batches) == 1 or any(b.num_rows != 1 for b in batches):
-            merged.extend(Chunk.from_record_batch(b)[0] for b in batches)
-            continue
-        fields, arrays = [batches[0].schema.field(0)], [batches[0].column(0)]
-        for b in batches:
-            fields.extend(b.schema.field(i) for i in range(1, b.num_columns))
-            arrays.extend(b.column(i) for i in range(1, b.num_columns))
-        batch = pa.RecordBatch.from_arrays(arrays, schema=pa.schema(fields, metadata=batches[0].schema.metadata))
-        merged.extend(Chunk.from_record_batch(batch))
-    return tuple(merged)
+def robot_poses(urdf: str, joints: list[JointFrame], base_pos_m: np.ndarray, base_quat_xyzw: np.ndarray,
+                joint_pos_rad: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """World centers (m, B, 3) and rotations (m, B, 4) of the robot's boxes, centers (m, S, 3) of its spheres."""
+    poses = link_poses(joints, base_pos_m, base_quat_xyzw, joint_pos_rad)
+    (box_links, box_xyz, box_quat, _, _), (sphere_links, sphere_xyz, _, _, _) = _robot_geometry(urdf)
+
+    def place(links, xyz):
+        pos = np.stack([poses[link][0] for link in links], axis=1)  # (m, k, 3)
+        quat = np.stack([poses[link][1] for link in links], axis=1)  # (m, k, 4)
+        return pos + quat_rotate(quat, xyz[None]), quat
+
+    box_centers, link_quat = place(box_links, box_xyz)
+    sphere_centers, _ = place(sphere_links, sphere_xyz)
+    return box_centers, quat_multiply(link_quat, np.broadcast_to(box_quat[None], link_quat.shape)), sphere_centers
 
 
 @lru_cache(maxsize=4)
-def _static_archetypes(joints: tuple[JointFrame, ...], reward_term_names: tuple[str, ...]) -> tuple:
+def _static_archetypes(urdf: str, reward_term_names: tuple[str, ...]) -> tuple:
     """The static per-entity data that is the same in every episode, built once per process."""
     import rerun as rr
 
-    out = [("/world/base", rr.Transform3D(parent_frame=WORLD_FRAME, child_frame="base"))]
-    out += [(f"/joints/{jf.name}", rr.Transform3D(parent_frame=jf.parent_link, child_frame=jf.child_link,
-                                                  translation=jf.origin_xyz_m)) for jf in joints]
+    (_, _, _, box_half, box_rgba), (_, _, _, sphere_half, sphere_rgba) = _robot_geometry(urdf)
+    solid = rr.components.FillMode.Solid
+    out = [("/world/robot/links", rr.Boxes3D(half_sizes=box_half, colors=box_rgba, fill_mode=solid)),
+           ("/world/robot/feet", rr.Ellipsoids3D(half_sizes=sphere_half, colors=sphere_rgba, fill_mode=solid))]
     out += [("/plots/reward", rr.SeriesLines(names=["reward"])),
             ("/plots/position_m", rr.SeriesLines(names=["progress", "lateral", "base height"])),
             ("/plots/attitude_deg", rr.SeriesLines(names=["roll", "pitch"]))]
@@ -166,17 +161,20 @@ def write_series_rrd(path: Path, se: RerunSeries, *, recording_id: str, urdf: st
     blueprint_stream = _save_with_blueprint(rec, path)
     try:
         rec.send_recording_name(recording_id)
-        rec.send_chunks(list(_urdf_chunks(urdf)))
         times = [rr.TimeColumn("sim_time", duration=se.time_s)]
-
-        # robot: base pose and joint rotations over time, frames static
-        for entity, archetype in _static_archetypes(tuple(joints), se.reward_term_names):
+        for entity, archetype in _static_archetypes(urdf, se.reward_term_names):
             rec.log(entity, archetype, static=True)
-        rec.send_columns("/world/base", times, rr.Transform3D.columns(
-            translation=se.base_pos_m.astype(np.float32), quaternion=se.base_quat_xyzw.astype(np.float32)))
-        rot = joint_rotations(joints, se.joint_pos_rad).astype(np.float32)
-        for j, jf in enumerate(joints):
-            rec.send_columns(f"/joints/{jf.name}", times, rr.Transform3D.columns(quaternion=rot[:, j]))
+
+        # robot: every box and foot sphere in world coordinates over time (forward kinematics from
+        # the base pose and joint angles); sizes and colours static
+        box_centers, box_quats, sphere_centers = robot_poses(urdf, joints, se.base_pos_m, se.base_quat_xyzw,
+                                                             se.joint_pos_rad)
+        m, b, f = len(se.time_s), box_centers.shape[1], sphere_centers.shape[1]
+        rec.send_columns("/world/robot/links", times, rr.Boxes3D.columns(
+            centers=box_centers.reshape(-1, 3).astype(np.float32),
+            quaternions=box_quats.reshape(-1, 4).astype(np.float32)).partition([b] * m))
+        rec.send_columns("/world/robot/feet", times, rr.Ellipsoids3D.columns(
+            centers=sphere_centers.reshape(-1, 3).astype(np.float32)).partition([f] * m))
 
         # world: terrain, path, goal line
         vertices, triangles = mesh
