@@ -10,12 +10,14 @@ stairs; the label in force is the majority of the last `Config.vote_window` labe
 does not switch gaits. Low level: the PPO-CPG policy trained on that terrain (baselines/ppo_cpg.py
 and its shipped weights), acting with that terrain's eps (paper 3.2: 0.6, 0.4, 0.3). The environment
 applies a_t = a_c + eps_env * a_r, so the residual a_r_k of policy k is sent as a_r_k * eps_k / eps_env
-(clipped to [-1, 1]); run the course with eps_env >= 0.6 so that no residual is clipped.
+(clipped to [-1, 1]); the mixed course's eps is 0.6, so no residual is clipped there.
 
-Status (hexbench 0.1.0): **not yet evaluable.** The submission protocol passes observations only, so a
-camera-aware runner has to call `see(image)` (the controller says which camera it wants in `camera`);
-neither that runner nor the mixed course task (rough, then slope, then stairs) exists yet, and the
-PPO-CPG weights are not shipped yet. Until an image has been seen, `act` refuses to guess.
+Camera: the evaluator sees `camera` and calls `see(image)` before `act` on step 0 and every
+`camera_every_steps` steps (hexbench.controller.SeeingController). Until an image has been seen,
+`act` refuses to guess.
+
+    hexbench run baselines/hlta.py --terrain mixed             # the mixed course (paper Table 5's question)
+    hexbench run baselines/ppo_cpg.py --terrain mixed          # against the rough-terrain policy alone
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ class Config:
     low_level_baseline: str = "ppo_cpg.py"  # per-terrain policies, from this baseline file
     classifier_checkpoint: str = "checkpoints/terrain_classifier.pt"
     vote_window: int = 3  # labels in the majority vote
+    camera_every_steps: int = 30  # control steps between images (0.5 s at 60 Hz)
     terrains: tuple[str, ...] = ("rough", "slopes", "stairs")  # the classifier's classes, in order
 
 
@@ -51,6 +54,7 @@ class HLTAController:
         if missing:
             raise ValueError(f"HLTA needs a low-level policy for every terrain; missing: {', '.join(missing)}")
         self.camera = TERRAIN_CAMERA
+        self.camera_every_steps = config.camera_every_steps
         self.policies = policies
         self.classify = classify  # image (H, W, 3) uint8 -> terrain name
         self.env_eps = float(env_eps)

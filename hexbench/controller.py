@@ -12,6 +12,16 @@ where a Controller is any object with
 
 The evaluator only passes observations in and takes actions out. Every action is checked
 (`check_action`) before it reaches the simulator.
+
+Optional camera (a `SeeingController`, e.g. baselines/hlta.py): a controller that also has
+
+    camera: hexbench.camera.CameraSpec   # the body-mounted camera it wants
+    camera_every_steps: int              # optional, default CAMERA_EVERY_STEPS (every 0.5 s)
+    def see(self, image: np.ndarray) -> object   # (H, W, 3) uint8 RGB
+
+gets `see(image)` before `act` on step 0 and then every `camera_every_steps` control steps. The
+image is rendered by PyBullet's CPU renderer with every terrain body painted `CAMERA_GROUND_RGB`
+(the lighting and painting of the terrain-image dataset, hexbench.dataset.views).
 """
 
 from __future__ import annotations
@@ -35,6 +45,17 @@ class Controller(Protocol):
     def reset(self, seed: int) -> None: ...
 
     def act(self, obs: np.ndarray) -> np.ndarray: ...
+
+
+CAMERA_EVERY_STEPS = 30  # control steps between camera images (0.5 s at 60 Hz)
+CAMERA_GROUND_RGB = (0.62, 0.6, 0.55)  # terrain colour in camera images (a plain grey-beige)
+
+
+@runtime_checkable
+class SeeingController(Controller, Protocol):
+    camera: object  # hexbench.camera.CameraSpec
+
+    def see(self, image: np.ndarray) -> object: ...
 
 
 class ControllerError(Exception):

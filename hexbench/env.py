@@ -34,7 +34,9 @@ from hexbench.sim import PhysicsConfig, Simulation
 from hexbench.terrain import TERRAIN_KINDS, make_terrain
 
 ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params")
-DEFAULT_RESIDUAL_SCALE: dict[str, float] = {"rough": 0.6, "slopes": 0.4, "stairs": 0.3, "flat": 0.6}
+# The mixed course takes the largest eps, so that a controller switching policies (HLTA) can send
+# each policy's residual unclipped (see baselines/hlta.py).
+DEFAULT_RESIDUAL_SCALE: dict[str, float] = {"rough": 0.6, "slopes": 0.4, "stairs": 0.3, "flat": 0.6, "mixed": 0.6}
 # HRL parameter ranges (paper 4.3): omega_swing [rad/s], A1, A2, A3.
 CPG_PARAM_LOW = np.array([math.pi / 2, -1.0, -0.5, -1.0])
 CPG_PARAM_HIGH = np.array([math.pi, 1.0, 1.0, 0.5])

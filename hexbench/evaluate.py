@@ -129,6 +129,7 @@ def run_episode(job: EpisodeJob) -> dict:
             raise
         except BaseException as e:  # noqa: BLE001
             raise ControllerError(f"{where}: reset() raised {type(e).__name__}: {e}") from None
+        see = _camera_channel(ctrl, env, where, job.act_timeout_s)
         dim = env.action_space.shape[0]
         dt = cfg.physics.control_dt_s
         rolls, pitches = [], []
@@ -137,6 +138,8 @@ def run_episode(job: EpisodeJob) -> dict:
         time_to_goal = None
         step = 0
         while True:
+            if see is not None:
+                see(step)
             try:
                 with _time_limit(job.act_timeout_s):
                     action = ctrl.act(obs.copy())
@@ -180,6 +183,37 @@ def run_episode(job: EpisodeJob) -> dict:
         if recorder is not None:
             recorder.abort()
         env.close()
+
+
+def _camera_channel(ctrl, env: HexapodEnv, where: str, timeout_s: float):
+    """For a controller with a camera (hexbench.controller.SeeingController): step -> maybe call see(image)."""
+    camera = getattr(ctrl, "camera", None)
+    if camera is None or not callable(getattr(ctrl, "see", None)):
+        return None
+    from hexbench.camera import CameraSpec, robot_camera_image
+    from hexbench.controller import CAMERA_EVERY_STEPS, CAMERA_GROUND_RGB
+    from hexbench.dataset.views import paint_terrain
+
+    if not isinstance(camera, CameraSpec):
+        raise ControllerError(f"{where}: camera is a {type(camera).__name__}; expected hexbench.camera.CameraSpec")
+    every = getattr(ctrl, "camera_every_steps", CAMERA_EVERY_STEPS)
+    if not isinstance(every, int) or every < 1:
+        raise ControllerError(f"{where}: camera_every_steps must be a positive int, got {every!r}")
+    paint_terrain(env.sim, CAMERA_GROUND_RGB)
+
+    def see(step: int) -> None:
+        if step % every:
+            return
+        image = robot_camera_image(env.sim, camera)
+        try:
+            with _time_limit(timeout_s):
+                ctrl.see(image)
+        except _ActTimeout:
+            raise ControllerError(f"{where}: see() took longer than {timeout_s:g} s at step {step}") from None
+        except BaseException as e:  # noqa: BLE001
+            raise ControllerError(f"{where}: see() raised {type(e).__name__} at step {step}: {e}") from None
+
+    return see
 
 
 def _worker_init() -> None:

@@ -232,12 +232,18 @@ class PolicyController:
         return np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
 
 
+# Courses without weights of their own and the policy that walks them: the mixed course gets the
+# rough-terrain policy (paper Table 5 runs the rough model on slopes and stairs the same way).
+POLICY_TERRAIN: dict[str, str] = {"mixed": "rough"}
+
+
 def make_policy_controller(config, checkpoints_dir: Path, method: str, terrain: str) -> PolicyController:
     """What a baseline file's make_controller(task) returns: its shipped weights for the terrain."""
     import torch
 
     torch.set_num_threads(1)
     validate_config(config, method)
+    terrain = POLICY_TERRAIN.get(terrain, terrain)
     path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
     policy = load_policy(config, path, entry["sha256"])
     return PolicyController(config.action_mode, policy, entry["sha256"])

@@ -45,6 +45,7 @@ TABLE1_WEIGHTS: dict[str, RewardWeights] = {
     "stairs": RewardWeights(1.0, 0.2, 0.2, 0.0, 0.01, 1.0),
 }
 TABLE1_WEIGHTS["flat"] = TABLE1_WEIGHTS["rough"]
+TABLE1_WEIGHTS["mixed"] = TABLE1_WEIGHTS["rough"]  # the HLTA course (evaluation only)
 
 KAPPA_DEG = 5.0
 HEIGHT_THRESHOLD_CM = 12.0
@@ -61,8 +62,10 @@ DIFFICULTY_STEP: dict[str, tuple[float, float]] = {
 
 def difficulty_factor(terrain: str, level: float) -> float:
     """delta of eq. 8 for a terrain level in the paper's units."""
+    if terrain not in ("rough", "slopes", "stairs"):
+        return 0.0  # flat ground and the mixed course (evaluation only)
     base, step = DIFFICULTY_STEP[terrain]
-    return max(0.0, 0.1 * (level - base) / step) if terrain != "flat" else 0.0
+    return max(0.0, 0.1 * (level - base) / step)
 
 
 def reward_terms(*, distance_m: float, heading_error_rad: float, fell: bool, pitch_up_deg: float,

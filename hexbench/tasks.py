@@ -7,6 +7,7 @@ as an unsigned integer, so they never depend on run order or on any global state
 
 Gymnasium ids (registered on `import hexbench`):
   hexbench/<Terrain>-<level><unit>-<Mode>-v1    every suite level x action mode, protocol rules
+                                                (the mixed course too: hexbench/Mixed-<level>-<Mode>-v1)
   hexbench/<Terrain>-Curriculum-<Mode>-v1       training curriculum of paper 4.1 (no stall rule)
   hexbench/Flat-<Mode>-v1                       flat ground, for sanity checks
 with <Mode> one of Joint, CpgResidual, CpgParams.
@@ -65,6 +66,7 @@ class TaskSpec:
     fall_tilt_deg: float
     stall_window_s: float
     stall_min_progress_m: float
+    in_full_run: bool = True  # False: an extra course (mixed) run only when selected by name
 
     @property
     def name(self) -> str:
@@ -93,14 +95,24 @@ class Suite:
 
     @property
     def terrains(self) -> tuple[str, ...]:
-        return tuple(dict.fromkeys(t.terrain for t in self.tasks))
+        """The terrains of the full run (what records and the leaderboard score)."""
+        return tuple(dict.fromkeys(t.terrain for t in self.tasks if t.in_full_run))
+
+    @property
+    def extra_terrains(self) -> tuple[str, ...]:
+        """Courses outside the full run (the mixed course), run only when selected by name."""
+        return tuple(dict.fromkeys(t.terrain for t in self.tasks if not t.in_full_run))
+
+    @property
+    def all_terrains(self) -> tuple[str, ...]:
+        return self.terrains + self.extra_terrains
 
     def levels(self, terrain: str, include_headroom: bool = True) -> list[float]:
         return [t.level for t in self.tasks if t.terrain == terrain and (include_headroom or not t.headroom)]
 
     def task(self, terrain: str, level: float) -> TaskSpec:
-        if terrain not in self.terrains:
-            raise ValueError(f"unknown terrain {terrain!r}; valid terrains: {', '.join(self.terrains)}")
+        if terrain not in self.all_terrains:
+            raise ValueError(f"unknown terrain {terrain!r}; valid terrains: {', '.join(self.all_terrains)}")
         for t in self.tasks:
             if t.terrain == terrain and abs(t.level - float(level)) < 1e-9:
                 return t
@@ -108,15 +120,15 @@ class Suite:
         raise ValueError(f"unknown {terrain} level {format_level(level)}; valid levels: {valid}")
 
     def select(self, terrains: list[str] | None = None, levels: list[float] | None = None) -> list[TaskSpec]:
-        """Tasks of the given terrains (default all) and levels (default all of each terrain).
+        """Tasks of the given terrains (default: the full run's) and levels (default all of each terrain).
 
         Raises ValueError naming the valid choices for an unknown terrain or a level that no
         selected terrain has.
         """
         chosen_terrains = list(terrains) if terrains else list(self.terrains)
         for t in chosen_terrains:
-            if t not in self.terrains:
-                raise ValueError(f"unknown terrain {t!r}; valid terrains: {', '.join(self.terrains)}")
+            if t not in self.all_terrains:
+                raise ValueError(f"unknown terrain {t!r}; valid terrains: {', '.join(self.all_terrains)}")
         out = [t for t in self.tasks if t.terrain in chosen_terrains]
         if levels:
             for lv in levels:
@@ -143,11 +155,12 @@ def load_suite(protocol: str = DEFAULT_PROTOCOL) -> Suite:
             for level in spec.get(key, []):
                 tasks.append(TaskSpec(
                     protocol=protocol, terrain=terrain, level=float(level), unit=spec["unit"], headroom=headroom,
-                    episodes=int(data["episodes_per_level"]), max_steps=int(data["max_steps"]),
-                    goal_distance_m=float(data["goal_distance_m"]),
+                    episodes=int(data["episodes_per_level"]), max_steps=int(spec.get("max_steps", data["max_steps"])),
+                    goal_distance_m=float(spec.get("goal_distance_m", data["goal_distance_m"])),
                     max_lateral_deviation_m=float(data["max_lateral_deviation_m"]),
                     fall_tilt_deg=float(data["fall_tilt_deg"]), stall_window_s=float(data["stall_window_s"]),
                     stall_min_progress_m=float(data["stall_min_progress_m"]),
+                    in_full_run=bool(spec.get("in_full_run", True)),
                 ))
     return Suite(protocol, tuple(tasks))
 

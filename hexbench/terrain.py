@@ -10,7 +10,9 @@ goal lies 2.5 m ahead (paper 4.1). The obstacle lies between start and goal:
           descent at theta over 0.8 m ending at x = 2.5 m (paper 4.1: ascent, flat, descent);
   stairs  four steps 0.4 m deep, each h high, risers at x = 0.3, 0.7, 1.1, 1.5 m, then a
           landing past the goal (paper 4.1);
-  flat    a plane, for sanity checks.
+  flat    a plane, for sanity checks;
+  mixed   the HLTA course: rough ground, then a slope (ascent, top, descent), then stairs, in
+          one episode (levels 1-3 of `MIXED_COURSE_LEVELS`; goal 6.3 m ahead, see below).
 
 Each terrain is a frozen dataclass; `build(client, rng)` creates its static bodies in a
 PyBullet client and `height_at(x, y)` gives the ground height analytically (the same surface
@@ -32,8 +34,19 @@ COURSE_END_X_M = 4.0  # terrain extent beyond the start [m]
 OBSTACLE_START_X_M = 0.3  # where every obstacle begins [m]
 TERRAIN_FRICTION = 0.5
 
-TERRAIN_KINDS: tuple[str, ...] = ("flat", "rough", "slopes", "stairs")
-LEVEL_UNITS: dict[str, str] = {"flat": "", "rough": "cm", "slopes": "deg", "stairs": "cm"}
+TERRAIN_KINDS: tuple[str, ...] = ("flat", "rough", "slopes", "stairs", "mixed")
+LEVEL_UNITS: dict[str, str] = {"flat": "", "rough": "cm", "slopes": "deg", "stairs": "cm", "mixed": ""}
+
+# The mixed course (paper Table 5's question: one policy, or the classifier dispatching three?).
+# Level -> (rough height difference [cm], slope angle [deg], step height [cm]); the ranges of
+# paper Table 5 (slopes 10-15 deg, stairs 5.5-8 cm) where the rough policy starts to fail.
+MIXED_COURSE_LEVELS: dict[int, tuple[float, float, float]] = {1: (6.0, 10.0, 5.0), 2: (8.0, 12.0, 6.0),
+                                                              3: (10.0, 14.0, 7.0)}
+MIXED_ROUGH_END_X_M = 1.7  # rough ground on [0.3, 1.7] m
+MIXED_SLOPE_START_X_M = 2.0  # slope on [2.0, 4.2] m (0.8 m ascent, 0.6 m top, 0.8 m descent)
+MIXED_STAIRS_START_X_M = 4.5  # risers at 4.5, 4.9, 5.3, 5.7 m
+MIXED_GOAL_DISTANCE_M = 6.3  # 0.6 m onto the top step
+MIXED_END_X_M = 7.3  # terrain extent beyond the start [m]
 
 
 class Terrain(Protocol):
@@ -52,21 +65,24 @@ class BuiltTerrain:
     heights_m: np.ndarray | None = None  # rough: heightfield [rows=y, cols=x]
     resolution_m: float = 0.05
     _profile: "Terrain | None" = None
+    end_x_m: float = COURSE_END_X_M  # terrain extent beyond the start [m]
 
     def height_at(self, x_m: float, y_m: float) -> float:
         """Ground height [m] under (x, y)."""
         if self.heights_m is not None:
             return _bilinear(self.heights_m, self.resolution_m, x_m, y_m)
+        if isinstance(self._profile, _MixedProfile):
+            return self._profile.profile_height(x_m, y_m)
         return self._profile.profile_height(x_m) if self._profile is not None else 0.0
 
     def slope_deg_at(self, x_m: float) -> float:
         """Course slope along +x under x [deg], ascent positive (0 except on slopes)."""
-        prof = self._profile
-        return prof.profile_slope_deg(x_m) if isinstance(prof, SlopesTerrain) else 0.0
+        slope = getattr(self._profile, "profile_slope_deg", None)
+        return slope(x_m) if slope is not None else 0.0
 
     def height_grid(self, resolution_m: float = 0.05) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Heights on a regular grid over the course: (xs [m], ys [m], z [len(ys), len(xs)] [m])."""
-        xs = np.arange(COURSE_START_X_M, COURSE_END_X_M + 1e-9, resolution_m)
+        xs = np.arange(COURSE_START_X_M, self.end_x_m + 1e-9, resolution_m)
         ys = np.arange(-COURSE_HALF_WIDTH_M, COURSE_HALF_WIDTH_M + 1e-9, resolution_m)
         z = np.array([[self.height_at(x, y) for x in xs] for y in ys])
         return xs, ys, z
@@ -202,6 +218,7 @@ class SlopesTerrain:
     angle_deg: float
     ramp_run_m: float = 0.8  # horizontal length of ascent and of descent
     top_length_m: float = 0.6
+    start_x_m: float = OBSTACLE_START_X_M  # foot of the ascent
     kind: str = "slopes"
 
     @property
@@ -210,7 +227,7 @@ class SlopesTerrain:
 
     @property
     def breakpoints_m(self) -> tuple[float, float, float, float]:
-        x0 = OBSTACLE_START_X_M
+        x0 = self.start_x_m
         x1 = x0 + self.ramp_run_m
         x2 = x1 + self.top_length_m
         return x0, x1, x2, x2 + self.ramp_run_m
@@ -239,11 +256,16 @@ class SlopesTerrain:
         return 0.0
 
     def build(self, client: int, rng: np.random.Generator) -> BuiltTerrain:
+        bodies = [_add_plane(client)] + self.build_bodies(client)
+        return BuiltTerrain(self.kind, self.level, bodies, _profile=self)
+
+    def build_bodies(self, client: int) -> list[int]:
+        """The ramps and the top (no ground under them)."""
         x0, x1, x2, x3 = self.breakpoints_m
         top = self.top_height_m
         theta = math.radians(self.angle_deg)
         thick = 0.3
-        bodies = [_add_plane(client)]
+        bodies = []
         if top > 0:
             # A tilted box whose top face runs along the ramp: rotate about y by -theta
             # (positive pitch about +y tips +x downwards), centred below the ramp midpoint.
@@ -255,7 +277,7 @@ class SlopesTerrain:
                 bodies.append(_add_box(client, cx - ramp_len / 2, cx + ramp_len / 2, cz + thick / 2,
                                        thickness=thick, pitch_rad=-sign * theta))
             bodies.append(_add_box(client, x1, x2, top, thickness=top))
-        return BuiltTerrain(self.kind, self.level, bodies, _profile=self)
+        return bodies
 
 
 @dataclass(frozen=True)
@@ -265,6 +287,8 @@ class StairsTerrain:
     step_height_cm: float
     step_depth_m: float = 0.4
     num_steps: int = 4
+    start_x_m: float = OBSTACLE_START_X_M  # first riser
+    end_x_m: float = COURSE_END_X_M  # end of the top landing
     kind: str = "stairs"
 
     @property
@@ -272,7 +296,7 @@ class StairsTerrain:
         return self.step_height_cm
 
     def riser_x_m(self, k: int) -> float:
-        return OBSTACLE_START_X_M + k * self.step_depth_m
+        return self.start_x_m + k * self.step_depth_m
 
     def profile_height(self, x_m: float) -> float:
         h = self.step_height_cm / 100.0
@@ -280,12 +304,66 @@ class StairsTerrain:
         return steps_up * h
 
     def build(self, client: int, rng: np.random.Generator) -> BuiltTerrain:
-        h = self.step_height_cm / 100.0
-        bodies = [_add_plane(client)]
-        if h > 0:
-            for k in range(self.num_steps):
-                bodies.append(_add_box(client, self.riser_x_m(k), COURSE_END_X_M, (k + 1) * h, thickness=(k + 1) * h))
+        bodies = [_add_plane(client)] + self.build_bodies(client)
         return BuiltTerrain(self.kind, self.level, bodies, _profile=self)
+
+    def build_bodies(self, client: int) -> list[int]:
+        """The steps (no ground under them)."""
+        h = self.step_height_cm / 100.0
+        if h <= 0:
+            return []
+        return [_add_box(client, self.riser_x_m(k), self.end_x_m, (k + 1) * h, thickness=(k + 1) * h)
+                for k in range(self.num_steps)]
+
+
+@dataclass(frozen=True)
+class MixedCourse:
+    """Rough ground, a slope and stairs in one course (the HLTA task); `level` indexes MIXED_COURSE_LEVELS."""
+
+    course_level: int
+
+    kind: str = "mixed"
+
+    def __post_init__(self) -> None:
+        if self.course_level not in MIXED_COURSE_LEVELS:
+            raise ValueError(f"unknown mixed course level {self.course_level!r}; valid levels: "
+                             f"{', '.join(str(k) for k in MIXED_COURSE_LEVELS)}")
+
+    @property
+    def level(self) -> float:
+        return float(self.course_level)
+
+    @property
+    def parts(self) -> tuple[RoughTerrain, SlopesTerrain, StairsTerrain]:
+        rough_cm, slope_deg, stairs_cm = MIXED_COURSE_LEVELS[self.course_level]
+        return (RoughTerrain(rough_cm, end_x_m=MIXED_ROUGH_END_X_M),
+                SlopesTerrain(slope_deg, start_x_m=MIXED_SLOPE_START_X_M),
+                StairsTerrain(stairs_cm, start_x_m=MIXED_STAIRS_START_X_M, end_x_m=MIXED_END_X_M))
+
+    def build(self, client: int, rng: np.random.Generator) -> BuiltTerrain:
+        rough, slope, stairs = self.parts
+        rough_built = rough.build(client, rng)  # heightfield over [COURSE_START_X_M, COURSE_END_X_M], 0 past the rough part
+        ground_beyond = _add_box(client, COURSE_END_X_M, MIXED_END_X_M, 0.0, thickness=0.1)
+        bodies = rough_built.body_ids + [ground_beyond] + slope.build_bodies(client) + stairs.build_bodies(client)
+        return BuiltTerrain(self.kind, self.level, bodies, _profile=_MixedProfile(rough_built, slope, stairs),
+                            end_x_m=MIXED_END_X_M)
+
+
+@dataclass(frozen=True)
+class _MixedProfile:
+    """Ground height and slope of a built mixed course: the heightfield before the slope, then the profiles."""
+
+    rough: BuiltTerrain
+    slope: SlopesTerrain
+    stairs: StairsTerrain
+
+    def profile_height(self, x_m: float, y_m: float = 0.0) -> float:
+        if x_m < (MIXED_ROUGH_END_X_M + MIXED_SLOPE_START_X_M) / 2:
+            return self.rough.height_at(x_m, y_m)
+        return self.slope.profile_height(x_m) + self.stairs.profile_height(x_m)
+
+    def profile_slope_deg(self, x_m: float) -> float:
+        return self.slope.profile_slope_deg(x_m)
 
 
 def make_terrain(kind: str, level: float) -> Terrain:
@@ -298,4 +376,9 @@ def make_terrain(kind: str, level: float) -> Terrain:
         return SlopesTerrain(angle_deg=float(level))
     if kind == "stairs":
         return StairsTerrain(step_height_cm=float(level))
+    if kind == "mixed":
+        if float(level) != int(level):
+            raise ValueError(f"unknown mixed course level {level!r}; valid levels: "
+                             f"{', '.join(str(k) for k in MIXED_COURSE_LEVELS)}")
+        return MixedCourse(course_level=int(level))
     raise ValueError(f"unknown terrain {kind!r}; valid terrains: {', '.join(TERRAIN_KINDS)}")

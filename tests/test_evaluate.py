@@ -36,6 +36,7 @@ BROKEN_CASES = {
     "out_of_bounds.py": "outside [-1, 1]",
     "returns_list.py": "act() returned list",
     "bad_action_mode.py": "action_mode is 'torque'; valid modes: joint, cpg_residual, cpg_params",
+    "see_raises.py": "see() raised OSError at step 3: camera unplugged",
 }
 
 
@@ -155,3 +156,36 @@ def test_list_shows_levels_and_every_id():
     assert r.exit_code == 0
     assert "5.5" in r.stdout and "headroom" in r.stdout
     assert all(i in r.stdout for i in registered_ids())
+
+
+def test_a_controller_with_a_camera_sees_the_painted_terrain_on_schedule(tmp_path):
+    """SeeingController: see(image) before act on step 0 and every camera_every_steps steps."""
+    ctrl_file = tmp_path / "looker.py"
+    ctrl_file.write_text(
+        "import numpy as np\n"
+        "from hexbench.camera import CameraSpec\n"
+        "LOG = []\n"
+        "class Looker:\n"
+        "    action_mode = 'cpg_residual'\n"
+        "    camera = CameraSpec(width_px=32, height_px=24)\n"
+        "    camera_every_steps = 4\n"
+        "    def reset(self, seed):\n"
+        "        self.step = 0\n"
+        "    def see(self, image):\n"
+        "        assert image.shape == (24, 32, 3) and image.dtype == np.uint8\n"
+        "        LOG.append((self.step, image.copy()))\n"
+        "    def act(self, obs):\n"
+        "        self.step += 1\n"
+        "        return np.zeros(18, dtype=np.float32)\n"
+        "def make_controller(task):\n"
+        "    return Looker()\n")
+    from hexbench import evaluate as ev
+
+    task = load_suite("v1").task("mixed", 1)
+    job = EpisodeJob(str(ctrl_file), task, 0, task.seeds(1)[0], max_steps=10)
+    row = run_episode(job)
+    module = ev._controller_for(job).__class__.__module__
+    log = sys.modules[module].LOG
+    assert row["steps"] == 10
+    assert [step for step, _ in log] == [0, 4, 8]  # before act on steps 0, 4, 8
+    assert log[-1][1].std() > 0  # a real rendered picture, not a blank

@@ -18,7 +18,7 @@ def test_suite_has_paper_table4_levels_and_headroom():
     assert max(suite.levels("rough")) == 16
     assert max(suite.levels("slopes")) == 24
     assert max(suite.levels("stairs")) == 10
-    assert all(t.episodes == 20 and t.max_steps == 4000 for t in suite.tasks)
+    assert all(t.episodes == 20 and t.max_steps == 4000 for t in suite.tasks if t.in_full_run)
 
 
 def test_seeds_are_fixed_distinct_and_order_free():
@@ -59,3 +59,16 @@ def test_readme_lists_every_registered_id(repo):
     readme = (repo / "README.md").read_text()
     missing = [i for i in registered_ids() if f"`{i}`" not in readme]
     assert not missing, f"README lacks {len(missing)} ids, e.g. {missing[:3]}"
+
+
+def test_mixed_course_is_an_extra_course_outside_the_full_run():
+    suite = load_suite("v1")
+    assert suite.terrains == ("rough", "slopes", "stairs")
+    assert suite.extra_terrains == ("mixed",)
+    assert all(t.terrain != "mixed" for t in suite.select())  # the default full run
+    mixed = suite.select(["mixed"])
+    assert [t.level for t in mixed] == [1.0, 2.0, 3.0]
+    assert all(t.goal_distance_m == 6.3 and t.max_steps == 8000 and t.episodes == 20 for t in mixed)
+    assert suite.task("mixed", 2).gym_id("cpg_residual") == "hexbench/Mixed-2-CpgResidual-v1"
+    with pytest.raises(ValueError, match="valid levels: mixed: 1, 2, 3"):
+        suite.select(["mixed"], [4])

@@ -182,5 +182,41 @@ def test_start_and_goal_lie_on_the_terrain_with_the_obstacle_between(client: int
 
 
 def test_unknown_terrain_names_the_valid_ones() -> None:
-    with pytest.raises(ValueError, match="valid terrains: flat, rough, slopes, stairs"):
+    with pytest.raises(ValueError, match="valid terrains: flat, rough, slopes, stairs, mixed"):
         make_terrain("sand", 3)
+
+
+@pytest.mark.parametrize("level", [1, 2, 3])
+def test_mixed_course_is_rough_then_slope_then_stairs(client: int, level: int) -> None:
+    from hexbench.terrain import (MIXED_COURSE_LEVELS, MIXED_END_X_M, MIXED_GOAL_DISTANCE_M, MIXED_ROUGH_END_X_M,
+                                  MIXED_SLOPE_START_X_M, MIXED_STAIRS_START_X_M)
+
+    rough_cm, slope_deg, stairs_cm = MIXED_COURSE_LEVELS[level]
+    built = build(client, "mixed", level, seed=level)
+    ys = np.linspace(-MAX_LATERAL_M, MAX_LATERAL_M, 17)
+    # rough part: the height difference of its level, flat ground before it
+    rough = ray_heights(client, np.arange(OBSTACLE_START_X_M, MIXED_ROUGH_END_X_M, 0.05), ys)
+    assert np.ptp(rough) == pytest.approx(rough_cm / 100, abs=0.005)
+    np.testing.assert_allclose(ray_heights(client, np.linspace(-0.5, 0.25, 10), ys), 0.0, atol=1e-6)
+    # slope part: ascent at its angle, then level ground between slope and stairs
+    xs = np.linspace(MIXED_SLOPE_START_X_M + 0.1, MIXED_SLOPE_START_X_M + 0.7, 20)
+    line = ray_heights(client, xs, np.array([0.0]))[0]
+    assert math.degrees(math.atan(np.polyfit(xs, line, 1)[0])) == pytest.approx(slope_deg, abs=0.2)
+    np.testing.assert_allclose(ray_heights(client, np.array([4.3, 4.4]), ys), 0.0, atol=1e-6)
+    # stairs part: four steps of its height, the goal on the top landing, ground to the end
+    treads = ray_heights(client, MIXED_STAIRS_START_X_M + np.array([0.2, 0.6, 1.0, 1.4]), np.array([0.0]))[0]
+    np.testing.assert_allclose(treads, stairs_cm / 100 * np.arange(1, 5), atol=1e-6)
+    top = ray_heights(client, np.linspace(MIXED_STAIRS_START_X_M + 1.25, MIXED_END_X_M - 0.05, 20), ys)
+    np.testing.assert_allclose(top, 4 * stairs_cm / 100, atol=1e-6)
+    assert MIXED_STAIRS_START_X_M + 1.2 < MIXED_GOAL_DISTANCE_M < MIXED_END_X_M - 0.5
+    # the analytic height (rewards, recordings) is the surface the physics sees
+    xq = np.linspace(-0.5, MIXED_END_X_M - 0.05, 300)
+    seen = ray_heights(client, xq, np.array([0.2]))[0]
+    analytic = np.array([built.height_at(x, 0.2) for x in xq])
+    assert np.mean(np.abs(seen - analytic) < 2e-3) > 0.97  # equal but within ~1 mm of an edge
+    assert built.slope_deg_at(MIXED_SLOPE_START_X_M + 0.4) == pytest.approx(slope_deg)
+
+
+def test_unknown_mixed_level_names_the_valid_ones() -> None:
+    with pytest.raises(ValueError, match="valid levels: 1, 2, 3"):
+        make_terrain("mixed", 4)

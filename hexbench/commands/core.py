@@ -21,9 +21,10 @@ def register(app: typer.Typer) -> None:
         table = Table(title=f"hexbench protocol {protocol}")
         for col in ("terrain", "unit", "paper levels (Table 4)", "headroom levels"):
             table.add_column(col)
-        for terrain in suite.terrains:
+        for terrain in suite.all_terrains:
             tasks = [t for t in suite.tasks if t.terrain == terrain]
-            table.add_row(terrain, tasks[0].unit,
+            name = terrain if tasks[0].in_full_run else f"{terrain} (extra course: --terrain {terrain})"
+            table.add_row(name, tasks[0].unit or "level",
                           ", ".join(format_level(t.level) for t in tasks if not t.headroom),
                           ", ".join(format_level(t.level) for t in tasks if t.headroom))
         console = Console()
@@ -56,7 +57,7 @@ def print_success_table(record: dict, console) -> None:
     for terrain in record["terrains"]:
         name = terrain["terrain"]
         table = Table(title=f"{record['label']} on {name} (protocol {record['protocol']})")
-        for col in (f"level ({terrain['unit']})", "success", "95% CI", "episodes", "speed (m/s)", "max |y| (m)"):
+        for col in (f"level ({terrain['unit']})" if terrain['unit'] else "level", "success", "95% CI", "episodes", "speed (m/s)", "max |y| (m)"):
             table.add_column(col, justify="right")
         for lv in (lv for lv in record["levels"] if lv["terrain"] == name):
             speed, max_y = lv.get("mean_forward_speed_m_per_s"), lv.get("mean_max_abs_y_m")
