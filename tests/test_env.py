@@ -98,6 +98,27 @@ def test_observation_noise_has_the_documented_standard_deviations(make_env) -> N
     np.testing.assert_array_equal(diffs[:, 60:62], 0.0)  # the target is known exactly
 
 
+def test_observation_noise_is_one_standard_normal_draw_of_62_per_observation(make_env) -> None:
+    """The env draws its noise in blocks of steps (speed); the numbers must be exactly those of one
+    `standard_normal(62)` per observation from the noise generator that reset spawns, across blocks
+    and across resets."""
+    from gymnasium.utils.seeding import np_random
+
+    noise = ObservationNoise()
+    std = noise.std_vector()
+    env = make_env(noise=noise, terrain="rough", level=5.0)
+    env_high = env.observation_space.high.astype(np.float64)
+    for seed in (11, 12):
+        noise_rng = np_random(seed)[0].spawn(3)[2]  # reset spawns (terrain, init pose, noise)
+        obs = env.reset(seed=seed)[0]
+        for k in range(75):  # more than two blocks
+            s = env.robot_state
+            clean = np.concatenate([s.values[0:57], s.base_rpy_rad, env.target_xy])
+            want = np.minimum(np.maximum(clean + std * noise_rng.standard_normal(OBS_DIM), -env_high), env_high)
+            np.testing.assert_array_equal(obs, want.astype(np.float32), err_msg=f"seed {seed}, step {k}")
+            obs, *_ = env.step(ZERO18)
+
+
 # ------------------------------------------------------------------------------ action modes
 def test_joint_mode_maps_the_unit_box_onto_the_joint_limits(make_env) -> None:
     env = make_env(action_mode="joint")
