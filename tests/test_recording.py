@@ -27,7 +27,8 @@ from hexbench.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 CPG = str(REPO / "baselines" / "cpg.py")
-SHORT_STEPS = 45
+SHORT_STEPS = 46
+METRICS_STEPS = list(range(3, SHORT_STEPS + 1, 3)) + [SHORT_STEPS]  # /metrics: every 3rd step and the last
 META = {"protocol": "v1", "terrain": "rough", "level": 6.0, "unit": "cm", "index": 0, "seed": 7,
         "action_mode": "cpg_residual", "controller_file": "baselines/cpg.py", "controller_sha256": "0" * 64,
         "hexbench_version": "test"}
@@ -124,11 +125,11 @@ def test_every_mcap_channel_reads_back_with_crc_validation(episode):
     pose = PoseInFrame.FromString(seen["/base_pose"][-1][1].data)
     assert pose.pose.position.x == pytest.approx(tf.transforms[0].translation.x)
 
-    # /metrics: one JSON object every 2nd step and at the last step, valid against the channel's own JSON schema
+    # /metrics: one JSON object every 3rd step and at the last step, valid against the channel's own JSON schema
     rows = [json.loads(m.data) for _, m in seen["/metrics"]]
-    assert [r["step"] for r in rows] == list(range(2, SHORT_STEPS, 2)) + [SHORT_STEPS]
+    assert [r["step"] for r in rows] == METRICS_STEPS
     assert [m.log_time for _, m in seen["/metrics"]] == [r["step"] * dt_ns for r in rows]
-    assert "every 2 steps" in meta["recording"]["metrics"]
+    assert "every 3 steps" in meta["recording"]["metrics"]
     schema = json.loads(seen["/metrics"][0][0].data)
     assert schema == json.loads(json.dumps(METRICS_SCHEMA))
     for r in rows:
@@ -151,7 +152,7 @@ def test_logged_numbers_match_the_simulation(episode):
                          env.sim.foot_contacts()))
     env.close()
     rows = metrics(out / files["mcap_path"])
-    assert len(rows) == SHORT_STEPS // 2 + 1
+    assert [r["step"] for r in rows] == METRICS_STEPS
     returns = np.cumsum([e[0] for e in expected])
     for row in rows:
         reward, a_c, progress, phases, contacts = expected[row["step"] - 1]
@@ -313,11 +314,11 @@ def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
     assert "match the re-simulation exactly" in ok.output
 
     tampered = tmp_path / "tampered.mcap"
-    _rewrite_with_changed_metric(path, tampered, step=18)  # /metrics logs steps 2, 4, ...: message 8
+    _rewrite_with_changed_metric(path, tampered, step=18)  # /metrics logs steps 3, 6, ...: message 5
     check_integrity(tampered)  # a consistent file: only re-simulation can tell
     bad = runner.invoke(app, ["verify", str(tampered)])
     assert bad.exit_code == 1
-    assert "/metrics message 8" in bad.output and "differs from the re-simulation" in bad.output
+    assert "/metrics message 5" in bad.output and "differs from the re-simulation" in bad.output
 
     flipped = tmp_path / "flipped.mcap"
     data = bytearray(path.read_bytes())

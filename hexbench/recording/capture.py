@@ -1,9 +1,15 @@
 """What the recorder keeps while an episode runs: references to per-step arrays, nothing encoded.
 
-Per step it costs a few list appends plus the foot-contact query; everything else (quantising,
-serialising, compressing) happens once in `on_end`, vectorised over the whole episode.
-Row 0 of the state arrays is the state right after reset (time 0); step k (k >= 1) is the
-state after the k-th control step, at simulated time k * control_dt.
+The recordings log the episode at reduced rates (see mcap_episode.McapPrecision and
+rerun_episode.RerunSettings), all multiples of one sampling period: every `every_n_steps`-th
+control step and the step that ends the episode are *sampled*. On a sampled step the capture
+keeps references to what the env made fresh (state, info with a_c, a_r, a_t), a copy of the
+action, the oscillator state and the foot contacts (one PyBullet query, the costly part); on
+every other step it keeps only the reward (the logged return sums every step). Everything else
+(quantising, serialising, compressing) happens once in `on_end`, vectorised over the episode.
+
+State row 0 is the state right after reset (time 0); state row i >= 1 is the state after
+sampled step `steps[i - 1]`, at simulated time steps[i - 1] * control_dt.
 """
 
 from __future__ import annotations
@@ -18,32 +24,50 @@ from hexbench.robot import FOOT_LINK_NAMES, JOINT_NAMES
 
 @dataclass(frozen=True)
 class EpisodeArrays:
-    """One episode, stacked. n = number of control steps; state arrays have n + 1 rows."""
+    """One episode, stacked. n = number of control steps, m = number of sampled steps."""
 
     control_dt_s: float
-    time_ns: np.ndarray  # (n + 1,) int64, simulated time of each state row [ns]
-    joint_pos_rad: np.ndarray  # (n + 1, 18)
-    joint_vel_rad_per_s: np.ndarray  # (n + 1, 18)
-    joint_torque_nm: np.ndarray  # (n + 1, 18)
-    base_pos_m: np.ndarray  # (n + 1, 3)
-    base_quat_xyzw: np.ndarray  # (n + 1, 4)
-    reward: np.ndarray  # (n,)
+    every_n_steps: int  # the sampling period [control steps]: every n-th step and the last one are sampled
+    steps: np.ndarray  # (m,) int64, the sampled steps (1-based, ascending, the last step included)
+    time_ns: np.ndarray  # (m + 1,) int64, simulated time of each state row [ns]: reset, then the sampled steps
+    joint_pos_rad: np.ndarray  # (m + 1, 18)
+    joint_vel_rad_per_s: np.ndarray  # (m + 1, 18)
+    joint_torque_nm: np.ndarray  # (m + 1, 18)
+    base_pos_m: np.ndarray  # (m + 1, 3)
+    base_quat_xyzw: np.ndarray  # (m + 1, 4)
+    reward: np.ndarray  # (n,) EVERY step's reward
     reward_term_names: tuple[str, ...]
-    reward_terms: np.ndarray  # (n, len(names))
-    action: np.ndarray  # (n, action_dim): what the controller returned (after validation)
-    a_c: np.ndarray  # (n, 18) CPG joint angles [rad]
-    a_r: np.ndarray  # (n, 18) policy part [rad]
-    a_t: np.ndarray  # (n, 18) joint targets sent [rad]
-    phases_rad: np.ndarray  # (n, 6) oscillator phases
-    contact_steps: np.ndarray  # (c,) int64, the 1-based steps at which the foot contacts were queried
-    foot_contacts: np.ndarray  # (c, 6) bool, at `contact_steps` (not every step: the query is the costly part)
-    progress_m: np.ndarray  # (n,)
-    lateral_m: np.ndarray  # (n,)
+    reward_terms: np.ndarray  # (m, len(names)), at the sampled steps (as all arrays below)
+    action: np.ndarray  # (m, action_dim): what the controller returned (after validation)
+    a_c: np.ndarray  # (m, 18) CPG joint angles [rad]
+    a_r: np.ndarray  # (m, 18) policy part [rad]
+    a_t: np.ndarray  # (m, 18) joint targets sent [rad]
+    phases_rad: np.ndarray  # (m, 6) oscillator phases
+    foot_contacts: np.ndarray  # (m, 6) bool
+    progress_m: np.ndarray  # (m,)
+    lateral_m: np.ndarray  # (m,)
     end_reason: str | None
 
     @property
     def num_steps(self) -> int:
         return len(self.reward)
+
+    @property
+    def state_steps(self) -> np.ndarray:
+        """(m + 1,) the control step of each state row (0 for the reset state)."""
+        return np.concatenate([[0], self.steps]).astype(np.int64)
+
+    def state_rows(self, every_n_steps: int) -> np.ndarray:
+        """Indices of the state rows at a coarser rate: reset, every `every_n_steps`-th step, the last row.
+
+        The rate must be a multiple of the sampling period (else those steps were not kept)."""
+        if every_n_steps % self.every_n_steps:
+            raise ValueError(f"a rate of every {every_n_steps} steps needs steps the capture did not keep "
+                             f"(it sampled every {self.every_n_steps})")
+        s = self.state_steps
+        keep = s % every_n_steps == 0
+        keep[-1] = True
+        return np.flatnonzero(keep)
 
 
 def touching_links(sim) -> frozenset:
@@ -69,62 +93,44 @@ def sim_time_ns(steps: np.ndarray | int, control_dt_s: float) -> np.ndarray:
     return np.asarray(steps, dtype=np.int64) * np.int64(round(control_dt_s * 1e9))
 
 
-def sampled_steps(num_steps: int, every_n_steps: int) -> np.ndarray:
-    """The 1-based steps logged at a reduced rate: every n-th step and always the last one."""
-    every = max(1, int(every_n_steps))
-    steps = np.arange(every, num_steps + 1, every, dtype=np.int64)
-    if num_steps and (not len(steps) or steps[-1] != num_steps):
-        steps = np.append(steps, np.int64(num_steps))
-    return steps
-
-
 class EpisodeCapture:
-    """Collects an episode from the environment (see module docstring).
+    """Collects an episode from the environment (see module docstring)."""
 
-    It keeps references, not copies, of what the env returns (fresh arrays every step: the
-    state, a_c, a_r, the sent targets); only the caller's action is copied. The foot contacts
-    (a PyBullet query, most of the per-step cost) are queried only every `contacts_every_n_steps`
-    steps and on the step that ends the episode (its info has an `end_reason`): the steps that
-    the per-step metrics are logged at.
-    """
-
-    def __init__(self, contacts_every_n_steps: int = 1) -> None:
-        self._state: list = []
-        self._steps: list[tuple] = []
-        self._contacts: list[tuple[int, frozenset]] = []
-        self._foot_links: tuple[int, ...] = ()
-        self._every = max(1, int(contacts_every_n_steps))
+    def __init__(self, every_n_steps: int = 1) -> None:
+        self.every_n_steps = max(1, int(every_n_steps))
         self.control_dt_s = 1.0 / 60.0
+        self._reset_state = None
+        self._rewards: list[float] = []
+        self._rows: list[tuple] = []
+        self._foot_links: tuple[int, ...] = ()
 
     def reset(self, env) -> None:
         self.control_dt_s = env.config.physics.control_dt_s
         self._foot_links = tuple(env.sim.foot_link_indices)
-        self._state = [env.robot_state]
-        self._steps = []
-        self._contacts = []
+        self._reset_state = env.robot_state
+        self._rewards = []
+        self._rows = []
 
     def step(self, env, action, reward, info) -> None:
-        # Only references to what the env made fresh this step, plus the contact query: the rest
-        # (phases from the oscillator state z, contacts per foot, the info fields) is unpacked
-        # once, vectorised, in arrays().
-        self._state.append(env.robot_state)
-        steps = self._steps
-        steps.append((float(reward), info, np.array(action, dtype=np.float64), env.cpg.z))
-        k = len(steps)
-        if k % self._every == 0 or info.get("end_reason") is not None:
-            self._contacts.append((k, touching_links(env.sim)))
+        rewards = self._rewards
+        rewards.append(float(reward))
+        k = len(rewards)
+        if k % self.every_n_steps == 0 or info.get("end_reason") is not None:
+            # references to what the env made fresh this step, a copy of the caller's action, the contacts
+            self._rows.append((k, env.robot_state, info, np.array(action, dtype=np.float64), env.cpg.z,
+                               touching_links(env.sim)))
 
     def arrays(self) -> EpisodeArrays:
-        states = self._state
-        steps = self._steps
-        n = len(steps)
-        infos = [st[1] for st in steps]
-        term_names = tuple(infos[0]["reward_terms"]) if n else ()
+        rows = self._rows
+        m = len(rows)
+        states = [self._reset_state] + [r[1] for r in rows]
+        infos = [r[2] for r in rows]
+        term_names = tuple(infos[0]["reward_terms"]) if m else ()
         feet = self._foot_links
 
         # np.concatenate joins many small 1-D arrays in C, several times faster than np.array or np.stack
         def stack(values, width):
-            return np.concatenate(values).astype(np.float64, copy=False).reshape(n, width) if n else np.zeros((0, width))
+            return np.concatenate(values).astype(np.float64, copy=False).reshape(m, width) if m else np.zeros((0, width))
 
         # RobotState fields are views into one float64 vector per step (hexbench.sim.RobotState.values):
         # stack those vectors once and take each field's columns at the offset its view has
@@ -139,28 +145,30 @@ class EpisodeCapture:
                 return np.ascontiguousarray(packed[:, start:start + len(f0)])
             return np.array([getattr(s, name) for s in states])
 
+        steps = np.array([r[0] for r in rows], dtype=np.int64)
         terms = itemgetter(*term_names) if term_names else None
         return EpisodeArrays(
             control_dt_s=self.control_dt_s,
-            time_ns=sim_time_ns(np.arange(n + 1), self.control_dt_s),
+            every_n_steps=self.every_n_steps,
+            steps=steps,
+            time_ns=sim_time_ns(np.concatenate([[0], steps]), self.control_dt_s),
             joint_pos_rad=state_field("joint_pos_rad"),
             joint_vel_rad_per_s=state_field("joint_vel_rad_per_s"),
             joint_torque_nm=state_field("joint_torque_nm"),
             base_pos_m=state_field("base_pos_m"),
             base_quat_xyzw=state_field("base_quat_xyzw"),
-            reward=np.array([st[0] for st in steps], dtype=np.float64).reshape(n),
+            reward=np.array(self._rewards, dtype=np.float64),
             reward_term_names=term_names,
-            reward_terms=(np.array([terms(i["reward_terms"]) for i in infos], dtype=np.float64).reshape(n, -1)
-                          if terms else np.zeros((n, 0))),
-            action=stack([st[2] for st in steps], len(steps[0][2]) if n else 18),
+            reward_terms=(np.array([terms(i["reward_terms"]) for i in infos], dtype=np.float64).reshape(m, -1)
+                          if terms else np.zeros((m, 0))),
+            action=stack([r[3] for r in rows], len(rows[0][3]) if m else 18),
             a_c=stack([i["a_c"] for i in infos], len(JOINT_NAMES)),
             a_r=stack([i["a_r"] for i in infos], len(JOINT_NAMES)),
             a_t=stack([i["a_t"] for i in infos], len(JOINT_NAMES)),
-            phases_rad=np.angle(np.concatenate([st[3] for st in steps])).reshape(n, -1) if n else np.zeros((0, 6)),
-            progress_m=np.array([i["progress_m"] for i in infos], dtype=np.float64).reshape(n),
-            lateral_m=np.array([i["lateral_m"] for i in infos], dtype=np.float64).reshape(n),
-            end_reason=infos[-1].get("end_reason") if n else None,
-            contact_steps=np.array([c[0] for c in self._contacts], dtype=np.int64),
-            foot_contacts=np.array([[f in c[1] for f in feet] for c in self._contacts],
-                                   dtype=bool).reshape(len(self._contacts), len(FOOT_LINK_NAMES)),
+            phases_rad=np.angle(np.concatenate([r[4] for r in rows])).reshape(m, -1) if m else np.zeros((0, 6)),
+            foot_contacts=np.array([[f in r[5] for f in feet] for r in rows],
+                                   dtype=bool).reshape(m, len(FOOT_LINK_NAMES)),
+            progress_m=np.array([i["progress_m"] for i in infos], dtype=np.float64).reshape(m),
+            lateral_m=np.array([i["lateral_m"] for i in infos], dtype=np.float64).reshape(m),
+            end_reason=infos[-1].get("end_reason") if m and rows[-1][0] == len(self._rewards) else None,
         )

@@ -45,8 +45,10 @@ class McapPrecision:
     joint_torque_bits: int = 8  # 2^-8 N m ~ 0.004 N m
     base_position_bits: int = 14  # 2^-14 m ~ 0.06 mm
     rotation_bits: int = 12  # quaternion components
-    joint_states_every_n_steps: int = 6  # /joint_states at 10 Hz (60 Hz control), with /tf; keeps 4000 steps < 1 MB
-    metrics_every_n_steps: int = 2  # /metrics at 30 Hz (and the last step); the foot-contact query runs only then
+    # Rates [control steps; 60 Hz control]; each also logs the last step. They must be multiples of the
+    # capture's sampling period, which the recorder sets to metrics_every_n_steps.
+    metrics_every_n_steps: int = 3  # /metrics at 20 Hz; the capture keeps (and queries foot contacts) only then
+    joint_states_every_n_steps: int = 6  # /joint_states at 10 Hz, with /tf; keeps a 4000-step episode < 1 MB
     tf_every_n_steps: int = 6  # /tf and /base_pose at 10 Hz (Foxglove interpolates transforms)
     chunk_size_bytes: int = 8 * 1024 * 1024  # the whole episode in one chunk, channels grouped: best compression
 
@@ -187,11 +189,6 @@ def _timestamp_fields(time_ns: np.ndarray) -> list[bytes]:
     return out
 
 
-def _rows(n_rows: int, every: int) -> list[int]:
-    """State rows logged at a reduced rate: 0, every, 2 every, ..., and always the last."""
-    return sorted(set(range(0, n_rows, max(1, every))) | {n_rows - 1})
-
-
 def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joints: list[JointFrame],
                        mesh: tuple[np.ndarray, np.ndarray], episode_meta: dict, outcome: dict,
                        precision: McapPrecision = McapPrecision(), library: str = "hexbench") -> None:
@@ -242,7 +239,7 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
     writer.add_message(ch["/terrain"], 0, _terrain_scene(*mesh), 0)
 
     # /joint_states: reset state, every joint_states_every_n_steps steps, last step
-    js_rows = _rows(len(t), precision.joint_states_every_n_steps)
+    js_rows = ep.state_rows(precision.joint_states_every_n_steps).tolist()
     pos = quantize(ep.joint_pos_rad, precision.joint_position_bits)
     vel = quantize(ep.joint_vel_rad_per_s[js_rows], precision.joint_velocity_bits)
     tq = quantize(ep.joint_torque_nm[js_rows], precision.joint_torque_bits)
@@ -252,7 +249,7 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
                  [ts_fields[r] + row.tobytes() for r, row in zip(js_rows, body)])
 
     # /base_pose and /tf at the tf rate: world -> base, then each joint's parent -> child
-    rows = _rows(len(t), precision.tf_every_n_steps)
+    rows = ep.state_rows(precision.tf_every_n_steps).tolist()
     t_rows = [t[r] for r in rows]
     base_pos = quantize(ep.base_pos_m[rows], precision.base_position_bits)
     base_quat = quantize(ep.base_quat_xyzw[rows], precision.rotation_bits)
@@ -267,28 +264,28 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
     tf_data = _frame_transforms_messages([ts_fields[r] for r in rows], parts)
     add_messages(writer, ch["/tf"], t_rows, tf_data)
 
-    # /metrics: one JSON object per logged step (every `metrics_every_n_steps` steps and the last,
-    # the steps the capture queried foot contacts at), each made by one %-format of a row of
-    # pre-formatted cells
-    k = ep.contact_steps - 1  # 0-based indices of the logged steps
+    # /metrics: one JSON object per logged step (every `metrics_every_n_steps` steps and the last),
+    # each made by one %-format of a row of pre-formatted cells
+    k = ep.state_rows(precision.metrics_every_n_steps)[1:] - 1  # indices into the sampled-step arrays
+    logged_steps = ep.steps[k]
     n = len(k)
-    ret = np.cumsum(ep.reward)[k]
-    scalars = np.column_stack([ep.time_ns[k + 1] / 1e9, ep.reward[k], ret, ep.reward_terms[k], ep.progress_m[k],
-                               ep.lateral_m[k]])
+    returns = np.cumsum(ep.reward)
+    scalars = np.column_stack([ep.time_ns[k + 1] / 1e9, ep.reward[logged_steps - 1], returns[logged_steps - 1],
+                               ep.reward_terms[k], ep.progress_m[k], ep.lateral_m[k]])
     if not np.all(np.isfinite(scalars)):
         raise ValueError("cannot log NaN or infinite reward, progress or lateral values")
     arrays = [("action", json_number_cells(ep.action[k])), ("a_c", json_number_cells(ep.a_c[k])),
               ("a_r", json_number_cells(ep.a_r[k])), ("a_t", json_number_cells(ep.a_t[k])),
-              ("phases_rad", json_number_cells(ep.phases_rad[k])), ("foot_contacts", json_bool_cells(ep.foot_contacts))]
+              ("phases_rad", json_number_cells(ep.phases_rad[k])), ("foot_contacts", json_bool_cells(ep.foot_contacts[k]))]
     terms = ",".join(f"{json.dumps(name)}:%.5g" for name in ep.reward_term_names)
     template = ('{"step":%d,"sim_time_s":%.5g,"reward":%.5g,"return":%.5g,"reward_terms":{' + terms + '},'
                 '"progress_m":%.5g,"lateral_m":%.5g,'
                 + ",".join(f'"{name}":[' + ",".join(["%s"] * cells.shape[1]) + "]" for name, cells in arrays)
                 + ',"end_reason":%s}')
     end_reasons = np.full((n, 1), "null", dtype=object)
-    if n and ep.contact_steps[-1] == ep.num_steps:
+    if n and logged_steps[-1] == ep.num_steps:
         end_reasons[-1, 0] = json.dumps(ep.end_reason)
-    cells = np.concatenate([ep.contact_steps.astype(object)[:, None], scalars.astype(object)]
+    cells = np.concatenate([logged_steps.astype(object)[:, None], scalars.astype(object)]
                            + [c for _, c in arrays] + [end_reasons], axis=1)
     texts = [(template % tuple(row)).encode() for row in cells.tolist()]
     add_messages(writer, ch["/metrics"], ep.time_ns[k + 1].tolist(), texts)

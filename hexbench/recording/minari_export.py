@@ -73,7 +73,7 @@ def export_run(run_dir: Path, dataset_id: str | None = None) -> Path:
                     truncations.append(bool(truncated))
                     if terminated or truncated:
                         break
-                # /metrics logs every 2nd step and the last one; compare the steps it has, and the count
+                # /metrics logs every 3rd step and the last one; compare the steps it has, and the count
                 logged = {m["step"]: m["reward"] for m in metrics(f)}
                 if max(logged, default=0) != len(rewards) or any(
                         float(f"{rewards[k - 1]:.5g}") != lr for k, lr in logged.items()):

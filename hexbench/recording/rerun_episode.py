@@ -133,15 +133,15 @@ class RerunSeries:
 
 
 def series_from_episode(ep: EpisodeArrays, every_n_steps: int) -> RerunSeries:
-    n_rows = len(ep.time_ns)
-    rows = np.array(sorted(set(range(0, n_rows, every_n_steps)) | {n_rows - 1}))
-    steps = rows[rows > 0]
-    k = steps - 1
+    rows = ep.state_rows(every_n_steps)  # reset row, every n-th step, the last step
+    plot = rows[rows > 0]
+    k = plot - 1  # the same steps in the sampled-step arrays
+    steps = ep.steps[k]  # 1-based control steps
     return RerunSeries(
         time_s=ep.time_ns[rows] / 1e9, joint_pos_rad=ep.joint_pos_rad[rows], base_pos_m=ep.base_pos_m[rows],
-        base_quat_xyzw=ep.base_quat_xyzw[rows], plot_time_s=ep.time_ns[steps] / 1e9, reward=ep.reward[k],
+        base_quat_xyzw=ep.base_quat_xyzw[rows], plot_time_s=ep.time_ns[plot] / 1e9, reward=ep.reward[steps - 1],
         reward_term_names=tuple(ep.reward_term_names), reward_terms=ep.reward_terms[k], progress_m=ep.progress_m[k],
-        lateral_m=ep.lateral_m[k], plot_base_pos_m=ep.base_pos_m[steps], plot_base_quat_xyzw=ep.base_quat_xyzw[steps])
+        lateral_m=ep.lateral_m[k], plot_base_pos_m=ep.base_pos_m[plot], plot_base_quat_xyzw=ep.base_quat_xyzw[plot])
 
 
 def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf: str, joints: list[JointFrame],
