@@ -6,8 +6,9 @@ on a task selection twice per repeat, once with `record=False` and once with `re
 
     time ratio = (evaluation time with recording) / (evaluation time without)
 
-is reported from the medians over the repeats, both as CPU time of this process
-(`time.process_time`, which also counts Rerun's writer threads) and as wall time. On a busy
+is reported from the medians over the repeats (which configuration runs first alternates), both
+as CPU time of this process (`time.process_time`, which also counts Rerun's writer threads) and
+as wall time. On a busy
 shared machine both ratios move by +-10% between runs of identical work, so the recorder's own
 CPU time is also measured directly (each on_reset / on_step / on_end call timed) and reported
 as a fraction of the unrecorded evaluation's CPU time: the steadier figure.
@@ -124,11 +125,15 @@ def main(argv: list[str] | None = None) -> int:
     recording.make_episode_recorder = lambda *a, **k: _TimedRecorder(original(*a, **k), clock)
     try:
         plain, recorded = [], []
-        for _ in range(args.repeats):
-            plain.append(_run(tasks, episodes, False, clock))
-            clock["recorder_s"] = 0.0
-            recorded.append(_run(tasks, episodes, True, clock))
-            recorded[-1]["recorder_s"] = clock["recorder_s"]
+        for i in range(args.repeats):
+            # alternate which configuration runs first (ABBA...), so a drift in machine load or a
+            # warm-cache advantage of the second run does not favour one side
+            for record in ((False, True) if i % 2 == 0 else (True, False)):
+                clock["recorder_s"] = 0.0
+                run = _run(tasks, episodes, record, clock)
+                if record:
+                    run["recorder_s"] = clock["recorder_s"]
+                (recorded if record else plain).append(run)
     finally:
         recording.make_episode_recorder = original
 
@@ -147,6 +152,9 @@ def main(argv: list[str] | None = None) -> int:
         "cpu_s": {"no_record": cpu_plain, "record": cpu_rec, "ratio": cpu_rec / cpu_plain},
         "wall_s": {"no_record": wall_plain, "record": wall_rec, "ratio": wall_rec / wall_plain},
         "recorder_cpu_s": rec_s, "recorder_fraction_of_plain_cpu": rec_s / cpu_plain,
+        "runs": {"no_record_cpu_s": [r["cpu_s"] for r in plain], "record_cpu_s": [r["cpu_s"] for r in recorded],
+                 "no_record_wall_s": [r["wall_s"] for r in plain], "record_wall_s": [r["wall_s"] for r in recorded],
+                 "recorder_cpu_s": [r["recorder_s"] for r in recorded]},
         "one_time_warm_up_cpu_s": warm_up_cpu_s,
         "bytes_per_episode": {
             "mcap_mean": statistics.mean(s["mcap_bytes"] for s in sizes),
@@ -163,6 +171,8 @@ def main(argv: list[str] | None = None) -> int:
     print(f"tasks {', '.join(result['tasks'])}; {len(sizes)} episodes, {n_steps} control steps, {args.repeats} repeats")
     print(f"CPU time   no record {cpu_plain:8.2f} s   record {cpu_rec:8.2f} s   ratio {cpu_rec / cpu_plain:.3f}")
     print(f"wall time  no record {wall_plain:8.2f} s   record {wall_rec:8.2f} s   ratio {wall_rec / wall_plain:.3f}")
+    print("per repeat, CPU s (no record / record): "
+          + ", ".join(f"{a['cpu_s']:.2f}/{b['cpu_s']:.2f}" for a, b in zip(plain, recorded)))
     print(f"recorder calls {rec_s:.2f} s CPU = {100 * rec_s / cpu_plain:.1f}% of the unrecorded CPU time; "
           f"one-time warm-up per worker {warm_up_cpu_s:.2f} s CPU (not included)")
     print(f"bytes/episode  mcap {b['mcap_mean'] / 1e3:.0f} kB  rrd {b['rrd_mean'] / 1e3:.0f} kB  "

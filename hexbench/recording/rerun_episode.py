@@ -35,7 +35,7 @@ APPLICATION_ID = "hexbench"
 
 @dataclass(frozen=True)
 class RerunSettings:
-    every_n_steps: int = 15  # 4 Hz at 60 Hz control: each row costs ~0.7 kB (19 transforms, 4 plots); 4000 steps < 1 MB
+    every_n_steps: int = 12  # 5 Hz at 60 Hz control: a row costs ~0.8 kB (19 boxes, 6 feet, 4 plots); 4000 steps < 1 MB
 
 
 def _rpy_deg(quat_xyzw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
