@@ -146,6 +146,7 @@ class HexapodEnv(gym.Env):
         self.cpg = HopfCPG(config.cpg, dt_s=config.physics.control_dt_s)
         n_act = 4 if config.action_mode == "cpg_params" else NUM_JOINTS
         self.action_space = gym.spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
+        self._action_low, self._action_high = np.full(n_act, -1.0), np.full(n_act, 1.0)
         self.observation_space = gym.spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
         self._noise_std = config.noise.std_vector()
         self._noise_on = bool(np.any(self._noise_std > 0))
@@ -214,12 +215,12 @@ class HexapodEnv(gym.Env):
         # The hot path (issue 2: env step at most 1.15x raw physics). Every numpy call costs about
         # a microsecond whatever the array size, so this does as few as give the same numbers:
         # the clip ufunc instead of np.minimum/np.maximum pairs, plain floats for the scalars.
-        action = np.asarray(action, dtype=np.float64)
+        action = action.astype(np.float64) if type(action) is np.ndarray else np.asarray(action, dtype=np.float64)
         if action.shape != self.action_space.shape:
             raise ValueError(f"action has shape {action.shape}; expected {self.action_space.shape}")
         if not math.isfinite(_add_reduce(action)) and not np.all(np.isfinite(action)):
             raise ValueError("action contains NaN or infinite values")
-        a_t, a_c, a_r = self.joint_targets(_clip(action, -1.0, 1.0))
+        a_t, a_c, a_r = self.joint_targets(_clip(action, self._action_low, self._action_high))
         sim = self.sim
         sent = sim.send_targets(a_t)
         sim.step_physics()

@@ -113,7 +113,10 @@ class Simulation:
         self._kp = [robot.servo_position_gain] * NUM_JOINTS
         self._kd = [robot.servo_velocity_gain] * NUM_JOINTS
         self._max_delta_rad = robot.servo_max_speed_rad_per_s * physics.control_dt_s
-        self._min_step_rad = -self._max_delta_rad
+        # per-joint bounds of one control step's target change (arrays: a little cheaper than scalars)
+        self._step_low_rad = np.full(NUM_JOINTS, -self._max_delta_rad)
+        self._step_high_rad = np.full(NUM_JOINTS, self._max_delta_rad)
+        self._substeps = range(physics.substeps_per_control)
 
     def load(self, terrain: Terrain, rng: np.random.Generator,
              base_xy_m: tuple[float, float] = (0.0, 0.0), yaw_rad: float = 0.0) -> None:
@@ -144,7 +147,7 @@ class Simulation:
         # The clip ufunc is min(max(x, lower), upper), as np.clip; none of these bounds is +-0.0,
         # so there is not even a sign-of-zero tie where it could differ from np.minimum/np.maximum.
         wanted = _clip(targets_rad, self.joint_lower_rad, self.joint_upper_rad)
-        self._command = self._command + _clip(wanted - self._command, self._min_step_rad, self._max_delta_rad)
+        self._command = self._command + _clip(wanted - self._command, self._step_low_rad, self._step_high_rad)
         p.setJointMotorControlArray(self.robot_id, self.joint_indices, p.POSITION_CONTROL,
                                     targetPositions=self._command.tolist(), forces=self._forces,
                                     positionGains=self._kp, velocityGains=self._kd, physicsClientId=self.client)
@@ -152,8 +155,9 @@ class Simulation:
 
     def step_physics(self) -> None:
         """Advance one control period (substeps_per_control physics steps)."""
-        for _ in range(self.physics.substeps_per_control):
-            p.stepSimulation(physicsClientId=self.client)
+        step, c = p.stepSimulation, self.client
+        for _ in self._substeps:
+            step(physicsClientId=c)
 
     def state(self) -> RobotState:
         c, r = self.client, self.robot_id
