@@ -60,6 +60,7 @@ class HLTAController:
         self.env_eps = float(env_eps)
         self.eps = {t: DEFAULT_RESIDUAL_SCALE[t] for t in config.terrains}
         self.votes: deque[str] = deque(maxlen=config.vote_window)
+        self.checkpoint_paths = [path for pol in policies.values() for path in getattr(pol, "checkpoint_paths", [])]
         self.terrain: str | None = None
         self.switches = 0
 
@@ -112,4 +113,6 @@ def make_controller(task, config: Config = CONFIG) -> HLTAController:
     low = load_controller_module(HERE / config.low_level_baseline)
     policies = {t: make_policy_controller(low.CONFIG, low.CHECKPOINTS_DIR, "ppo_cpg", t) for t in config.terrains}
     env_eps = DEFAULT_RESIDUAL_SCALE.get(task.terrain, max(DEFAULT_RESIDUAL_SCALE.values()))
-    return HLTAController(policies, make_classify(HERE / config.classifier_checkpoint), env_eps, config)
+    ctrl = HLTAController(policies, make_classify(HERE / config.classifier_checkpoint), env_eps, config)
+    ctrl.checkpoint_paths.append(HERE / config.classifier_checkpoint)
+    return ctrl

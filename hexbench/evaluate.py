@@ -294,6 +294,29 @@ class RunResult:
     error: str | None = None
 
 
+def _checkpoints_used(controller_file: str, tasks: list[TaskSpec], first_ctrl) -> list[dict]:
+    """Path and sha256 of every weights file the controller loads for the tasks' terrains.
+
+    A controller lists them in an optional `checkpoint_paths` attribute (the trained baselines
+    do); one controller per terrain is built here, since baselines load per-terrain weights.
+    """
+    seen: dict[str, dict] = {}
+    ctrls = {tasks[0].terrain: first_ctrl}
+    for task in tasks:
+        if task.terrain not in ctrls:
+            ctrls[task.terrain] = make_controller(controller_file, task)
+    for ctrl in ctrls.values():
+        for path in getattr(ctrl, "checkpoint_paths", []) or []:
+            path = Path(path).resolve()
+            try:
+                shown = str(path.relative_to(Path.cwd()))
+            except ValueError:
+                shown = str(path)
+            if shown not in seen:
+                seen[shown] = {"path": shown, "sha256": file_sha256(path)}
+    return [seen[k] for k in sorted(seen)]
+
+
 def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | Path, *, episodes: int | None = None,
              workers: int = 1, record: bool = True, label: str | None = None, progress: bool = True,
              command: str | None = None) -> RunResult:
@@ -305,7 +328,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     # Load once here: a file that fails to import or build fails before any worker starts.
     ctrl = make_controller(controller_file, tasks[0])
     action_mode = ctrl.action_mode
-    checkpoints = [{"path": str(p), "sha256": file_sha256(p)} for p in getattr(ctrl, "checkpoint_paths", [])]
+    checkpoints = _checkpoints_used(controller_file, tasks, ctrl)
     sha = file_sha256(controller_file)
     created_out = not out.exists()
     journal = out / ".journal"

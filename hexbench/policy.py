@@ -219,10 +219,12 @@ def shipped_checkpoint(checkpoints_dir: Path, method: str, terrain: str) -> tupl
 class PolicyController:
     """A trained SB3 policy behind the hexbench Controller protocol (deterministic actions)."""
 
-    def __init__(self, action_mode: str, policy, checkpoint_sha256: str = ""):
+    def __init__(self, action_mode: str, policy, checkpoint_sha256: str = "", checkpoint_path: Path | None = None):
         self.action_mode = action_mode
         self.policy = policy
         self.checkpoint_sha256 = checkpoint_sha256
+        # the weights files behind this controller (result records list them with their sha256)
+        self.checkpoint_paths = [Path(checkpoint_path)] if checkpoint_path is not None else []
 
     def reset(self, seed: int) -> None:  # deterministic policy: nothing to reseed
         pass
@@ -246,4 +248,4 @@ def make_policy_controller(config, checkpoints_dir: Path, method: str, terrain: 
     terrain = POLICY_TERRAIN.get(terrain, terrain)
     path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
     policy = load_policy(config, path, entry["sha256"])
-    return PolicyController(config.action_mode, policy, entry["sha256"])
+    return PolicyController(config.action_mode, policy, entry["sha256"], path)

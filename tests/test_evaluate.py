@@ -189,3 +189,15 @@ def test_a_controller_with_a_camera_sees_the_painted_terrain_on_schedule(tmp_pat
     assert row["steps"] == 10
     assert [step for step, _ in log] == [0, 4, 8]  # before act on steps 0, 4, 8
     assert log[-1][1].std() > 0  # a real rendered picture, not a blank
+
+
+def test_record_lists_the_weights_files_a_trained_baseline_loads(tmp_path):
+    import hashlib
+
+    task = load_suite("v1").task("rough", 3)
+    res = evaluate(str(REPO / "baselines" / "ppo_cpg.py"), [task], tmp_path / "out", episodes=1, workers=1,
+                   record=False, progress=False)
+    listed = res.record["controller"]["checkpoints"]
+    weights = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
+    assert [Path(c["path"]).resolve() for c in listed] == [weights.resolve()]
+    assert listed[0]["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
