@@ -96,6 +96,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=2, help="runs of each configuration (default 2)")
     ap.add_argument("--long-steps", type=int, default=4000,
                     help="also record episodes of this many steps for their size (default 4000, 0: skip)")
+    ap.add_argument("--paired", type=int, default=0,
+                    help="also run this many pairs of one episode (stairs 5 cm, index 0) with and without recording, "
+                         "back to back in alternating order, and report the median of the pairs' CPU ratios")
     ap.add_argument("--json", help="also write the results to this JSON file")
     args = ap.parse_args(argv)
 
@@ -152,6 +155,8 @@ def main(argv: list[str] | None = None) -> int:
         "cpu_s": {"no_record": cpu_plain, "record": cpu_rec, "ratio": cpu_rec / cpu_plain},
         "wall_s": {"no_record": wall_plain, "record": wall_rec, "ratio": wall_rec / wall_plain},
         "recorder_cpu_s": rec_s, "recorder_fraction_of_plain_cpu": rec_s / cpu_plain,
+        "paired_ratio_median": {k: med(b[f"{k}_s"] / a[f"{k}_s"] for a, b in zip(plain, recorded))
+                                for k in ("cpu", "wall")},
         "runs": {"no_record_cpu_s": [r["cpu_s"] for r in plain], "record_cpu_s": [r["cpu_s"] for r in recorded],
                  "no_record_wall_s": [r["wall_s"] for r in plain], "record_wall_s": [r["wall_s"] for r in recorded],
                  "recorder_cpu_s": [r["recorder_s"] for r in recorded]},
@@ -165,6 +170,8 @@ def main(argv: list[str] | None = None) -> int:
         "per_episode": [{**s, "steps": steps.get(_row_key(s["episode"]), None)} for s in sizes],
         "load_average": list(os.getloadavg()),
     }
+    if args.paired:
+        result["paired_episode"] = _paired_episode(suite.task("stairs", 5.0), args.paired)
     if args.long_steps:
         result["long_episodes"] = [_long_episode(args.long_steps, noise) for noise in (0.0, 0.3)]
     b = result["bytes_per_episode"]
@@ -172,7 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     print(f"CPU time   no record {cpu_plain:8.2f} s   record {cpu_rec:8.2f} s   ratio {cpu_rec / cpu_plain:.3f}")
     print(f"wall time  no record {wall_plain:8.2f} s   record {wall_rec:8.2f} s   ratio {wall_rec / wall_plain:.3f}")
     print("per repeat, CPU s (no record / record): "
-          + ", ".join(f"{a['cpu_s']:.2f}/{b['cpu_s']:.2f}" for a, b in zip(plain, recorded)))
+          + ", ".join(f"{a['cpu_s']:.2f}/{b['cpu_s']:.2f}" for a, b in zip(plain, recorded))
+          + f"; median of the paired ratios: CPU {result['paired_ratio_median']['cpu']:.3f}, "
+            f"wall {result['paired_ratio_median']['wall']:.3f}")
     print(f"recorder calls {rec_s:.2f} s CPU = {100 * rec_s / cpu_plain:.1f}% of the unrecorded CPU time; "
           f"one-time warm-up per worker {warm_up_cpu_s:.2f} s CPU (not included)")
     print(f"bytes/episode  mcap {b['mcap_mean'] / 1e3:.0f} kB  rrd {b['rrd_mean'] / 1e3:.0f} kB  "
@@ -181,6 +190,12 @@ def main(argv: list[str] | None = None) -> int:
     for e in result["per_episode"]:
         print(f"  {e['episode']:<16} {e['steps'] or '?':>5} steps  mcap {e['mcap_bytes'] / 1e3:6.0f} kB  "
               f"rrd {e['rrd_bytes'] / 1e3:6.0f} kB")
+    pe = result.get("paired_episode")
+    if pe:
+        print(f"one episode ({pe['steps']} steps) x {pe['pairs']} pairs: CPU with / without recording, median "
+              f"{pe['cpu_ratio_median']:.3f} (quartiles {pe['cpu_ratio_quartiles'][0]:.3f}-"
+              f"{pe['cpu_ratio_quartiles'][1]:.3f}); median CPU {pe['no_record_cpu_s_median']:.3f} -> "
+              f"{pe['record_cpu_s_median']:.3f} s")
     for e in result.get("long_episodes", []):
         print(f"{e['steps']}-step episode, rough 6 cm, goal out of reach, residual noise sigma {e['residual_noise']:g}: "
               f"mcap {e['mcap_bytes'] / 1e3:.0f} kB  rrd {e['rrd_bytes'] / 1e3:.0f} kB  "
@@ -210,6 +225,31 @@ def _warm_up() -> None:
                 break
         rec.on_end({"steps": 20})
     env.close()
+
+
+def _paired_episode(task, pairs: int) -> dict:
+    """One episode through the evaluator's own episode function, with and without recording, `pairs` times."""
+    from hexbench.evaluate import EpisodeJob, run_episode
+    from hexbench.tasks import episode_seed
+
+    seed = episode_seed(task.protocol, task.terrain, task.level, 0)
+    ratios, plain, recorded, steps = [], [], [], 0
+    with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
+        for i in range(pairs):
+            cpu = {}
+            for record in ((False, True) if i % 2 == 0 else (True, False)):
+                job = EpisodeJob(str(CPG), task, 0, seed, record_dir=tmp if record else None)
+                t0 = time.process_time()
+                row = run_episode(job)
+                cpu[record] = time.process_time() - t0
+                steps = row["steps"]
+            plain.append(cpu[False])
+            recorded.append(cpu[True])
+            ratios.append(cpu[True] / cpu[False])
+    q = statistics.quantiles(ratios, n=4) if len(ratios) > 1 else [ratios[0]] * 3
+    return {"task": task.name, "steps": steps, "pairs": pairs, "cpu_ratio_median": statistics.median(ratios),
+            "cpu_ratio_quartiles": [q[0], q[2]], "cpu_ratios": ratios,
+            "no_record_cpu_s_median": statistics.median(plain), "record_cpu_s_median": statistics.median(recorded)}
 
 
 def _long_episode(steps: int, noise: float) -> dict:
