@@ -90,30 +90,37 @@ class TaskSpec:
 
 @dataclass(frozen=True)
 class Suite:
+    """A protocol's tasks: `tasks` make the full run (what records and the leaderboard score);
+    `extra_tasks` are courses outside it (the mixed course), run only when selected by name."""
+
     protocol: str
     tasks: tuple[TaskSpec, ...]
+    extra_tasks: tuple[TaskSpec, ...] = ()
+
+    @property
+    def all_tasks(self) -> tuple[TaskSpec, ...]:
+        return self.tasks + self.extra_tasks
 
     @property
     def terrains(self) -> tuple[str, ...]:
-        """The terrains of the full run (what records and the leaderboard score)."""
-        return tuple(dict.fromkeys(t.terrain for t in self.tasks if t.in_full_run))
+        """The terrains of the full run."""
+        return tuple(dict.fromkeys(t.terrain for t in self.tasks))
 
     @property
     def extra_terrains(self) -> tuple[str, ...]:
-        """Courses outside the full run (the mixed course), run only when selected by name."""
-        return tuple(dict.fromkeys(t.terrain for t in self.tasks if not t.in_full_run))
+        return tuple(dict.fromkeys(t.terrain for t in self.extra_tasks))
 
     @property
     def all_terrains(self) -> tuple[str, ...]:
         return self.terrains + self.extra_terrains
 
     def levels(self, terrain: str, include_headroom: bool = True) -> list[float]:
-        return [t.level for t in self.tasks if t.terrain == terrain and (include_headroom or not t.headroom)]
+        return [t.level for t in self.all_tasks if t.terrain == terrain and (include_headroom or not t.headroom)]
 
     def task(self, terrain: str, level: float) -> TaskSpec:
         if terrain not in self.all_terrains:
             raise ValueError(f"unknown terrain {terrain!r}; valid terrains: {', '.join(self.all_terrains)}")
-        for t in self.tasks:
+        for t in self.all_tasks:
             if t.terrain == terrain and abs(t.level - float(level)) < 1e-9:
                 return t
         valid = ", ".join(format_level(v) for v in self.levels(terrain))
@@ -129,7 +136,7 @@ class Suite:
         for t in chosen_terrains:
             if t not in self.all_terrains:
                 raise ValueError(f"unknown terrain {t!r}; valid terrains: {', '.join(self.all_terrains)}")
-        out = [t for t in self.tasks if t.terrain in chosen_terrains]
+        out = [t for t in self.all_tasks if t.terrain in chosen_terrains]
         if levels:
             for lv in levels:
                 if not any(abs(t.level - lv) < 1e-9 for t in out):
@@ -162,7 +169,7 @@ def load_suite(protocol: str = DEFAULT_PROTOCOL) -> Suite:
                     stall_min_progress_m=float(data["stall_min_progress_m"]),
                     in_full_run=bool(spec.get("in_full_run", True)),
                 ))
-    return Suite(protocol, tuple(tasks))
+    return Suite(protocol, tuple(t for t in tasks if t.in_full_run), tuple(t for t in tasks if not t.in_full_run))
 
 
 def curriculum_config(terrain: str, action_mode: str, **overrides) -> EnvConfig:
@@ -183,7 +190,7 @@ def register_envs(protocol: str = DEFAULT_PROTOCOL) -> None:
     entry = "hexbench.env:HexapodEnv"
     for mode in ACTION_MODES:
         m = MODE_IDS[mode]
-        for task in load_suite(protocol).tasks:
+        for task in load_suite(protocol).all_tasks:
             gid = task.gym_id(mode)
             if gid not in gym.registry:
                 gym.register(gid, entry_point=entry, kwargs={"config": task.env_config(mode)})

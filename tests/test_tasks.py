@@ -18,7 +18,7 @@ def test_suite_has_paper_table4_levels_and_headroom():
     assert max(suite.levels("rough")) == 16
     assert max(suite.levels("slopes")) == 24
     assert max(suite.levels("stairs")) == 10
-    assert all(t.episodes == 20 and t.max_steps == 4000 for t in suite.tasks if t.in_full_run)
+    assert all(t.episodes == 20 and t.max_steps == 4000 for t in suite.tasks)
 
 
 def test_seeds_are_fixed_distinct_and_order_free():

@@ -22,7 +22,7 @@ def register(app: typer.Typer) -> None:
         for col in ("terrain", "unit", "paper levels (Table 4)", "headroom levels"):
             table.add_column(col)
         for terrain in suite.all_terrains:
-            tasks = [t for t in suite.tasks if t.terrain == terrain]
+            tasks = [t for t in suite.all_tasks if t.terrain == terrain]
             name = terrain if tasks[0].in_full_run else f"{terrain} (extra course: --terrain {terrain})"
             table.add_row(name, tasks[0].unit or "level",
                           ", ".join(format_level(t.level) for t in tasks if not t.headroom),
