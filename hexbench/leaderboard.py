@@ -13,6 +13,10 @@ Records (hexbench/schemas/result.schema.json) come in two kinds, validated on se
              is one reported controller with per-level success rates. Shown as a reference beside
              the measured entries, never ranked with them.
 
+Extra courses (the mixed course) are scored apart: their records live in `leaderboard/courses/`,
+are validated the same way against the course's levels and seeds, and render
+`leaderboard/courses/README.md`; they are never ranked with the full run.
+
 Records of different protocol versions are never mixed: a build shows one protocol; records of
 other protocols are skipped with a line saying so.
 
@@ -162,19 +166,24 @@ def _check_provenance(record: dict, where: str) -> None:
         raise RecordError(f"{where}: controller.sha256 is empty; a measured record must carry its controller's sha256")
 
 
-def _check_episodes(record: dict, suite: Suite, where: str) -> None:
-    """Every seed of every protocol level present exactly once; nothing else; outcomes coherent."""
+def _check_episodes(record: dict, suite: Suite, where: str, tasks: tuple | None = None) -> None:
+    """Every seed of every level of `tasks` (default: the full run) present exactly once; nothing else;
+    outcomes coherent."""
+    tasks = suite.tasks if tasks is None else tasks
     expected: dict[tuple[str, str], list[int]] = {
-        (t.terrain, format_level(t.level)): t.seeds() for t in suite.tasks
+        (t.terrain, format_level(t.level)): t.seeds() for t in tasks
     }
     seen: dict[tuple[str, str, int], int] = {}
     for n, ep in enumerate(record["episodes"]):
         key = (ep["terrain"], format_level(ep["level"]))
         name = f"episodes[{n}] ({ep['terrain']} {format_level(ep['level'])}, index {ep['index']})"
         if key not in expected:
-            if ep["terrain"] not in suite.terrains:
-                raise RecordError(f"{where}: {name}: terrain {ep['terrain']!r} is not in protocol {suite.protocol}; "
-                                  f"valid terrains: {', '.join(suite.terrains)}")
+            scored = tuple(dict.fromkeys(t.terrain for t in tasks))
+            if ep["terrain"] not in scored:
+                why = ("is an extra course, scored apart (leaderboard/courses/)" if ep["terrain"] in suite.all_terrains
+                       else f"is not in protocol {suite.protocol}")
+                raise RecordError(f"{where}: {name}: terrain {ep['terrain']!r} {why}; valid terrains: "
+                                  f"{', '.join(scored)}")
             valid = ", ".join(format_level(v) for v in suite.levels(ep["terrain"]))
             raise RecordError(f"{where}: {name}: level {format_level(ep['level'])} is not a {ep['terrain']} level of "
                               f"protocol {suite.protocol}; valid levels: {valid}")
@@ -223,18 +232,27 @@ def _compare_summaries(stored: list[dict], recomputed: list[dict], key_fields: t
                                   f"{_show(s[name])} in the record but {_show(fresh)} recomputed from the episodes")
 
 
-def measured_row(record: dict, where: str) -> Row:
-    """Validate a measured record (see module docstring) and return its row; RecordError if refused."""
+def measured_row(record: dict, where: str, course: bool = False) -> Row:
+    """Validate a measured record (see module docstring) and return its row; RecordError if refused.
+
+    course=True validates a record of the extra courses (every seed of every level of the courses
+    it covers) instead of the full run.
+    """
     check_schema(record, where)
     if record["kind"] != "measured":
         raise RecordError(f"{where}: kind is {record['kind']!r}; expected 'measured'")
     suite = _suite_for(record, where)
     _check_provenance(record, where)
-    _check_episodes(record, suite, where)
-    units = {t.terrain: t.unit for t in suite.tasks}
-    headroom = {(t.terrain, t.level): t.headroom for t in suite.tasks}
+    if course:
+        covered = {e["terrain"] for e in record["episodes"]}
+        tasks = tuple(t for t in suite.extra_tasks if t.terrain in covered) or suite.extra_tasks
+    else:
+        tasks = suite.tasks
+    _check_episodes(record, suite, where, tasks)
+    units = {t.terrain: t.unit for t in tasks}
+    headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     # Episode levels are normalised to the suite's float so the headroom lookup cannot miss.
-    suite_level = {(t.terrain, format_level(t.level)): t.level for t in suite.tasks}
+    suite_level = {(t.terrain, format_level(t.level)): t.level for t in tasks}
     episodes = [{**e, "level": suite_level[(e["terrain"], format_level(e["level"]))]} for e in record["episodes"]]
     levels = scoring.summarize_levels(episodes, units, headroom)
     terrains = scoring.summarize_terrains(levels)
@@ -916,6 +934,67 @@ class BuildResult:
     skipped: list[str]
 
 
+# ------------------------------------------------------------------------- extra courses
+COURSES_DIR = "courses"  # records of the extra courses (the mixed course), scored apart
+
+
+def is_course_record(record: dict) -> bool:
+    """A measured record whose episodes all lie on extra courses (not the full run)."""
+    try:
+        suite = load_suite(record["protocol"])
+        terrains = {e["terrain"] for e in record["episodes"]}
+    except (KeyError, TypeError, ValueError):
+        return False
+    return bool(terrains) and terrains <= set(suite.extra_terrains)
+
+
+def load_course_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
+    result = LoadResult([], [], [])
+    for path in record_files(directory):
+        try:
+            record = read_record(path)
+            if record.get("protocol") != protocol:
+                result.skipped.append(f"{path}: protocol {record.get('protocol')!r}, not {protocol!r}")
+                continue
+            result.rows.append(measured_row(record, str(path), course=True))
+        except RecordError as e:
+            result.errors.append(str(e))
+    return result
+
+
+def render_courses_readme(rows: list[Row], suite: Suite) -> str:
+    out = [f"# hexbench extra courses: protocol {suite.protocol}\n",
+           "Generated by `hexbench leaderboard build` from the result records in this folder (records of "
+           "`hexbench run FILE --terrain mixed`); do not edit by hand. These courses are outside the full "
+           "run and are not ranked with it. Success rate per level with the 95% Wilson interval; 20 seeded "
+           "episodes per level.\n"]
+    for terrain in suite.extra_terrains:
+        levels = suite.levels(terrain)
+        course_rows = sorted((r for r in rows if r.terrain(terrain)), key=lambda r: r.label)
+        out.append(f"## {terrain}\n")
+        if terrain == "mixed":
+            from hexbench.terrain import MIXED_COURSE_LEVELS
+
+            out.append("Rough ground, then a slope, then four stairs in one episode; goal 6.3 m ahead "
+                       "(docs/protocol.md). Levels: " + "; ".join(
+                           f"{k}: rough {r:g} cm, slope {sl:g} deg, stairs {st:g} cm"
+                           for k, (r, sl, st) in MIXED_COURSE_LEVELS.items()) + ".\n")
+        if not course_rows:
+            out.append("No records yet.\n")
+            continue
+        header = ["Controller"] + [f"level {format_level(v)}" for v in levels] + [
+            "Mean speed [m/s]", "Episodes", "Record", "Controller file", "git commit"]
+        table = [[r.label] + [_md_cell(r.level(terrain, v), True) for v in levels] + [
+            fmt_num(r.terrain(terrain)["mean_forward_speed_m_per_s"], 3), str(r.details["episodes"]), r.source,
+            r.details["controller_file"], str(r.details["git_commit"])[:12]] for r in course_rows]
+        out.append(_md_table(header, table) + "\n")
+        out.append("Commands:\n")
+        for r in course_rows:
+            out.append(f"- {r.label}: `{r.details['command']}`")
+        out.append("")
+    return "\n".join(out)
+
+
 def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCOL) -> BuildResult:
     """Read every record under `directory`, write README.md, index.html and leaderboard.csv there.
 
@@ -930,8 +1009,15 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
     board = make_board(load, protocol)
     texts = render_all(board)
     files = {directory / name: texts[name] for name in GENERATED_FILES}
+    errors, skipped = list(load.errors), list(load.skipped)
+    courses = directory / COURSES_DIR
+    if courses.is_dir():
+        course_load = load_course_rows(courses, protocol)
+        errors += course_load.errors
+        skipped += course_load.skipped
+        files[courses / "README.md"] = render_courses_readme(course_load.rows, board.suite)
     _atomic_write_all(files)
-    return BuildResult(list(files), board, load.errors, load.skipped)
+    return BuildResult(list(files), board, errors, skipped)
 
 
 def slug(label: str) -> str:
@@ -944,7 +1030,14 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
     """Validate a record and copy it into `directory` as <slug(label)>.json; RecordError if refused."""
     result_path, directory = Path(result_path), Path(directory)
     record = read_record(result_path)
-    rows = rows_of(record, str(result_path))
+    if is_course_record(record):  # extra courses are scored apart, in their own folder
+        rows = [measured_row(record, str(result_path), course=True)]
+        if not directory.is_dir():
+            raise RecordError(f"{directory}: no such leaderboard directory")
+        directory = directory / COURSES_DIR
+        directory.mkdir(exist_ok=True)
+    else:
+        rows = rows_of(record, str(result_path))
     if record["protocol"] != protocol:
         raise RecordError(f"{result_path}: record is protocol {record['protocol']}, this leaderboard shows {protocol} "
                           "(records of different protocols are never mixed; pass --protocol to choose)")

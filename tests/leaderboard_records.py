@@ -18,12 +18,14 @@ END_REASONS_FAILED = ("fall", "lateral_deviation", "stalled", "step_limit")
 
 
 def synthetic_record(label: str, capability: dict[str, float], seed: int, *, protocol: str = "v1",
-                     episodes: int | None = None, slope_width: float = 0.6) -> dict:
-    """A measured record whose success probability falls from 1 to 0 around `capability[terrain]`."""
+                     episodes: int | None = None, slope_width: float = 0.6, courses: bool = False) -> dict:
+    """A measured record whose success probability falls from 1 to 0 around `capability[terrain]`
+    (of the full run, or with courses=True of the extra courses)."""
     suite = load_suite(protocol)
     rng = np.random.default_rng(seed)
     rows = []
-    for task in suite.tasks:
+    tasks = suite.extra_tasks if courses else suite.tasks
+    for task in tasks:
         p = 1.0 / (1.0 + math.exp((task.level - capability[task.terrain]) / slope_width))
         for index, ep_seed in enumerate(task.seeds(episodes)):
             success = bool(rng.random() < p)
@@ -37,8 +39,8 @@ def synthetic_record(label: str, capability: dict[str, float], seed: int, *, pro
                 "max_abs_y_m": float(rng.uniform(0, 0.5)), "roll_rms_deg": float(rng.uniform(1, 6)),
                 "pitch_rms_deg": float(rng.uniform(1, 6)), "cost_of_transport": float(rng.uniform(1, 4)),
             })
-    units = {t.terrain: t.unit for t in suite.tasks}
-    headroom = {(t.terrain, t.level): t.headroom for t in suite.tasks}
+    units = {t.terrain: t.unit for t in tasks}
+    headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     levels = summarize_levels(rows, units, headroom)
     return {
         "schema_version": 1, "protocol": protocol, "label": label, "kind": "measured",

@@ -319,3 +319,27 @@ def test_committed_leaderboard_is_what_build_produces(tmp_path):
         names.remove("index.html")  # plots drawn by another matplotlib version: SVG bytes legitimately differ
     for name in names:
         assert (copy / name).read_bytes() == (committed / name).read_bytes(), f"leaderboard/{name} is stale"
+
+
+def test_extra_course_records_are_scored_apart_in_their_own_table(tmp_path):
+    board = tmp_path / "board"
+    board.mkdir()
+    for label, capability, seed in (("hlta", 2.6, 7), ("ppo_cpg", 1.4, 8)):
+        path = tmp_path / f"{label}.json"
+        path.write_text(json.dumps(synthetic_record(label, {"mixed": capability}, seed, courses=True)))
+        assert lb.add(path, board) == board / "courses" / f"{label}.json"
+    result = lb.build(board)
+    assert not result.errors
+    text = (board / "courses" / "README.md").read_text()
+    assert "| hlta |" in text and "| ppo_cpg |" in text and "level 3" in text
+    assert len(result.board.measured) == 0  # not mixed into the full-run ranking
+    # a course record missing an episode is refused like any other
+    broken = synthetic_record("broken", {"mixed": 2.0}, 9, courses=True)
+    broken["episodes"].pop()
+    (board / "courses" / "broken.json").write_text(json.dumps(broken))
+    assert any("missing episode mixed" in e for e in lb.build(board).errors)
+    # and mixed episodes inside a full-run record are refused with the reason
+    full = synthetic_record("full", {"rough": 9, "slopes": 11, "stairs": 6}, 10)
+    full["episodes"].append(dict(broken["episodes"][0]))
+    with pytest.raises(lb.RecordError, match="'mixed' is an extra course, scored apart"):
+        lb.measured_row(full, "full.json")
