@@ -19,6 +19,13 @@ The issue's target is ratio <= 1.15. Times are CPU time of this process
     python bench/env_speed.py                 # all terrains, 1000 steps, 3 repeats
     python bench/env_speed.py --terrain rough --steps 500 --json out.json
     python bench/env_speed.py --breakdown     # also: where the env's time per step goes
+    python bench/env_speed.py --floor         # also: the same lockstep with a bare API loop as the env
+
+`--floor` runs the lockstep a second time with the env replaced by the least any env has to do
+per control step through PyBullet's Python API: command 18 targets, the substeps, read the joint
+states and the base pose into one float64 vector, cast it to float32. Its ratio is the part of
+the 1.15 budget no environment code can win back on this machine under its current load (cache
+contention from other processes inflates Python and API calls far more than Bullet's inner loops).
 """
 
 from __future__ import annotations
@@ -112,6 +119,64 @@ def measure(terrain: str, steps: int, repeats: int) -> Measurement:
                        statistics.median(r[1] for r in runs) / steps / 1e3)
 
 
+def floor_lockstep(env: HexapodEnv, raw: HexapodEnv, steps: int) -> tuple[int, int]:
+    """Like `lockstep`, with `env.step` replaced by the bare API loop (see module docstring): the joint
+    targets are those the env sends (recorded in an untimed first pass), so both worlds again follow the
+    env's trajectory. Returns (bare loop CPU ns, raw stepSimulation CPU ns)."""
+    env.reset(seed=SEED)
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
+    targets = []
+    for k in range(steps):
+        _, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            raise RuntimeError(f"episode ended early ({info['end_reason']}) at step {k + 1}; use fewer --steps")
+        targets.append(info["a_t"].tolist())
+    env.reset(seed=SEED)
+    raw.reset(seed=SEED)
+    (client, robot, joints), (raw_client, raw_robot, raw_joints) = [
+        (w.sim.client, w.sim.robot_id, w.sim.joint_indices) for w in (env, raw)]
+    sim = raw.sim
+    substeps = sim.physics.substeps_per_control
+    forces = [sim.robot_spec.servo_stall_torque_nm] * len(joints)
+    kp = [sim.robot_spec.servo_position_gain] * len(joints)
+    kd = [sim.robot_spec.servo_velocity_gain] * len(joints)
+    step_simulation = p.stepSimulation
+    floor_ns = raw_ns = 0
+    for target in targets:
+        t0 = time.process_time_ns()
+        p.setJointMotorControlArray(robot, joints, p.POSITION_CONTROL, targetPositions=target, forces=forces,
+                                    positionGains=kp, velocityGains=kd, physicsClientId=client)
+        for _ in range(substeps):
+            step_simulation(physicsClientId=client)
+        q, qd, _, tau = zip(*p.getJointStates(robot, joints, physicsClientId=client))
+        pos, quat = p.getBasePositionAndOrientation(robot, physicsClientId=client)
+        np.fromiter(q + qd + tau + pos + quat + p.getEulerFromQuaternion(quat), np.float64, 64).astype(np.float32)
+        floor_ns += time.process_time_ns() - t0
+        p.setJointMotorControlArray(raw_robot, raw_joints, p.POSITION_CONTROL, targetPositions=target,
+                                    forces=forces, positionGains=kp, velocityGains=kd, physicsClientId=raw_client)
+        t0 = time.process_time_ns()
+        for _ in range(substeps):
+            step_simulation(physicsClientId=raw_client)
+        raw_ns += time.process_time_ns() - t0
+    floor_final = np.array(p.getBasePositionAndOrientation(robot, physicsClientId=client)[0])
+    raw_final = np.array(p.getBasePositionAndOrientation(raw_robot, physicsClientId=raw_client)[0])
+    if float(np.max(np.abs(floor_final - raw_final))) > 1e-9:
+        raise RuntimeError("bare-loop world diverged from the raw world; the two timings would not cover the same physics")
+    return floor_ns, raw_ns
+
+
+def measure_floor(terrain: str, steps: int, repeats: int) -> float:
+    """Median floor/raw CPU time ratio (see `floor_lockstep`)."""
+    config = EnvConfig(terrain=terrain, level=BENCH_LEVELS[terrain], action_mode="cpg_residual")
+    env, raw = HexapodEnv(config), HexapodEnv(config)
+    try:
+        runs = [floor_lockstep(env, raw, steps) for _ in range(repeats)]
+    finally:
+        env.close()
+        raw.close()
+    return statistics.median(r[0] for r in runs) / statistics.median(r[1] for r in runs)
+
+
 BREAKDOWN_PARTS: tuple[tuple[str, str, str], ...] = (
     # (label, object attribute path on the env, method name)
     ("CPG step", "cpg", "step"),
@@ -160,6 +225,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3, help="runs per terrain; medians are reported (default 3)")
     parser.add_argument("--json", metavar="PATH", help="also write the results as JSON to PATH")
     parser.add_argument("--breakdown", action="store_true", help="also show where the env step's time goes")
+    parser.add_argument("--floor", action="store_true",
+                        help="also measure the bare PyBullet API loop's ratio: the least any env can reach here")
     args = parser.parse_args(argv)
     if args.steps < 1 or args.repeats < 1:
         parser.error("--steps and --repeats must be at least 1")
@@ -187,6 +254,10 @@ def main(argv: list[str] | None = None) -> int:
     load = os.getloadavg()[0]
     console.print(f"worst ratio {worst.ratio:.3f} ({worst.terrain}); target <= 1.15; "
                   f"1-min load average {load:.1f} on {os.cpu_count()} CPUs (contention inflates the Python share)")
+    floors = {t: measure_floor(t, args.steps, args.repeats) for t in terrains} if args.floor else {}
+    if floors:
+        console.print("bare API loop (floor) ratio: " + ", ".join(f"{t} {r:.3f}" for t, r in floors.items())
+                      + f"; 1-min load average now {os.getloadavg()[0]:.1f}")
     parts = {t: breakdown(t, args.steps) for t in terrains} if args.breakdown else {}
     if parts:
         split = Table(title="env step breakdown, CPU us per step (a_r = 0)")
@@ -203,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
             "load_average_1min": load,
             "results": [{"terrain": m.terrain, "level": m.level, "env_us_per_step": m.env_us_per_step,
                          "raw_us_per_step": m.raw_us_per_step, "ratio": m.ratio} for m in results],
-            "breakdown_us_per_step": parts,
+            "breakdown_us_per_step": parts, "floor_ratio": floors,
         }
         with open(args.json, "w") as f:
             json.dump(payload, f, indent=2)
