@@ -163,8 +163,9 @@ class Simulation:
         c, r = self.client, self.robot_id
         q, qd, _, tau = zip(*p.getJointStates(r, self.joint_indices, physicsClientId=c))
         pos, quat = p.getBasePositionAndOrientation(r, physicsClientId=c)
-        # np.fromiter with a known count: the same doubles as np.array(tuple), at under half the cost
-        return RobotState(np.fromiter(q + qd + tau + pos + quat + p.getEulerFromQuaternion(quat), np.float64, 64),
+        # np.fromiter with a known count over one tuple: the same doubles as np.array(q + qd + ...),
+        # without the intermediate tuples, at under half the cost
+        return RobotState(np.fromiter((*q, *qd, *tau, *pos, *quat, *p.getEulerFromQuaternion(quat)), np.float64, 64),
                           1.0 - 2.0 * (quat[0] * quat[0] + quat[1] * quat[1]), c, r)
 
     def foot_contacts(self) -> np.ndarray:
