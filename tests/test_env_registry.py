@@ -21,11 +21,11 @@ def test_every_suite_level_curriculum_and_flat_is_registered_for_every_mode() ->
     expected = set()
     for mode in ACTION_MODES:
         m = MODE_IDS[mode]
-        expected |= {task.gym_id(mode) for task in SUITE.tasks}
+        expected |= {task.gym_id(mode) for task in SUITE.all_tasks}
         expected |= {f"hexbench/{t}-Curriculum-{m}-v1" for t in ("Rough", "Slopes", "Stairs")}
         expected.add(f"hexbench/Flat-{m}-v1")
     assert set(IDS) == expected
-    assert len(IDS) == 3 * (len(SUITE.tasks) + 3 + 1) == 141
+    assert len(IDS) == 3 * (len(SUITE.all_tasks) + 3 + 1) == 150  # 43 full-run levels + 3 mixed-course levels
     assert "hexbench/Stairs-5.5cm-CpgResidual-v1" in IDS
     assert "hexbench/Slopes-24deg-Joint-v1" in IDS
     assert "hexbench/Rough-3cm-CpgParams-v1" in IDS
