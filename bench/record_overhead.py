@@ -197,7 +197,8 @@ def main(argv: list[str] | None = None) -> int:
               f"{pe['cpu_ratio_quartiles'][1]:.3f}); median CPU {pe['no_record_cpu_s_median']:.3f} -> "
               f"{pe['record_cpu_s_median']:.3f} s")
     for e in result.get("long_episodes", []):
-        print(f"{e['steps']}-step episode, rough 6 cm, goal out of reach, residual noise sigma {e['residual_noise']:g}: "
+        print(f"{e['steps']}-step episode, rough 6 cm, goal out of reach, "
+              f"residual noise sigma {e['residual_noise']:g}: "
               f"mcap {e['mcap_bytes'] / 1e3:.0f} kB  rrd {e['rrd_bytes'] / 1e3:.0f} kB  "
               f"both {(e['mcap_bytes'] + e['rrd_bytes']) / 1e3:.0f} kB")
     print("load average (1, 5, 15 min) at the end: " + ", ".join(f"{v:.2f}" for v in result["load_average"]))

@@ -130,7 +130,9 @@ class EpisodeCapture:
 
         # np.concatenate joins many small 1-D arrays in C, several times faster than np.array or np.stack
         def stack(values, width):
-            return np.concatenate(values).astype(np.float64, copy=False).reshape(m, width) if m else np.zeros((0, width))
+            if not m:
+                return np.zeros((0, width))
+            return np.concatenate(values).astype(np.float64, copy=False).reshape(m, width)
 
         # RobotState fields are views into one float64 vector per step (hexbench.sim.RobotState.values):
         # stack those vectors once and take each field's columns at the offset its view has

@@ -276,7 +276,8 @@ def write_episode_mcap(stream: IO[bytes], ep: EpisodeArrays, *, urdf: str, joint
         raise ValueError("cannot log NaN or infinite reward, progress or lateral values")
     arrays = [("action", json_number_cells(ep.action[k])), ("a_c", json_number_cells(ep.a_c[k])),
               ("a_r", json_number_cells(ep.a_r[k])), ("a_t", json_number_cells(ep.a_t[k])),
-              ("phases_rad", json_number_cells(ep.phases_rad[k])), ("foot_contacts", json_bool_cells(ep.foot_contacts[k]))]
+              ("phases_rad", json_number_cells(ep.phases_rad[k])),
+              ("foot_contacts", json_bool_cells(ep.foot_contacts[k]))]
     terms = ",".join(f"{json.dumps(name)}:%.5g" for name in ep.reward_term_names)
     template = ('{"step":%d,"sim_time_s":%.5g,"reward":%.5g,"return":%.5g,"reward_terms":{' + terms + '},'
                 '"progress_m":%.5g,"lateral_m":%.5g,'
