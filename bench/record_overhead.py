@@ -23,6 +23,7 @@ and <= 1 MB per episode for both files together.
     python bench/record_overhead.py                              # one level per terrain, 2 episodes each
     python bench/record_overhead.py --full --repeats 1           # the whole protocol v1 (long)
     python bench/record_overhead.py --terrain stairs --levels 2 --episodes 3 --json out.json
+    perf stat -e task-clock python bench/record_overhead.py --one-process record   # (or plain, none)
 """
 
 from __future__ import annotations
@@ -99,6 +100,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--paired", type=int, default=0,
                     help="also run this many pairs of one episode (stairs 5 cm, index 0) with and without recording, "
                          "back to back in alternating order, and report the median of the pairs' CPU ratios")
+    ap.add_argument("--one-process", choices=("none", "plain", "record"),
+                    help="only warm up, then (plain / record) run episode 0 of each selected task without / with "
+                         "recording, and exit: for an A/B across fresh processes under `perf stat -e task-clock` "
+                         "(none: the warm-up alone, to subtract)")
     ap.add_argument("--json", help="also write the results to this JSON file")
     args = ap.parse_args(argv)
 
@@ -116,6 +121,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             tasks = [suite.task(t, DEFAULT_LEVELS[t]) for t in terrains]
         episodes = args.episodes
+
+    if args.one_process:
+        _warm_up()
+        if args.one_process != "none":
+            _one_process(tasks, record=args.one_process == "record")
+        return 0
 
     # Warm-up: a worker pays once for importing Rerun, parsing the URDF and building lookup
     # tables (~1 s); it is reported separately and kept out of the per-episode comparison.
@@ -226,6 +237,16 @@ def _warm_up() -> None:
                 break
         rec.on_end({"steps": 20})
     env.close()
+
+
+def _one_process(tasks, record: bool) -> None:
+    from hexbench.evaluate import EpisodeJob, run_episode
+    from hexbench.tasks import episode_seed
+
+    with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
+        for task in tasks:
+            seed = episode_seed(task.protocol, task.terrain, task.level, 0)
+            run_episode(EpisodeJob(str(CPG), task, 0, seed, record_dir=tmp if record else None))
 
 
 def _paired_episode(task, pairs: int) -> dict:
