@@ -219,9 +219,13 @@ def shipped_checkpoint(checkpoints_dir: Path, method: str, terrain: str) -> tupl
 class PolicyController:
     """A trained SB3 policy behind the hexbench Controller protocol (deterministic actions)."""
 
-    def __init__(self, action_mode: str, policy, checkpoint_sha256: str = "", checkpoint_path: Path | None = None):
+    def __init__(self, action_mode: str, policy, checkpoint_sha256: str = "", checkpoint_path: Path | None = None,
+                 target_horizon_m: float | None = None):
         self.action_mode = action_mode
         self.policy = policy
+        # On a course longer than the training goal distance, the target the policy sees is held at
+        # most this far ahead of the base (a waypoint on the way to the goal), as in training.
+        self.target_horizon_m = target_horizon_m
         self.checkpoint_sha256 = checkpoint_sha256
         # the weights files behind this controller (result records list them with their sha256)
         self.checkpoint_paths = [Path(checkpoint_path)] if checkpoint_path is not None else []
@@ -230,6 +234,9 @@ class PolicyController:
         pass
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        if self.target_horizon_m is not None:
+            obs = np.array(obs, copy=True)
+            obs[TARGET_X_INDEX] = min(obs[TARGET_X_INDEX], obs[BASE_X_INDEX] + self.target_horizon_m)
         action, _ = self.policy.predict(scale_observation(obs), deterministic=True)
         return np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
 
@@ -237,15 +244,26 @@ class PolicyController:
 # Courses without weights of their own and the policy that walks them: the mixed course gets the
 # rough-terrain policy (paper Table 5 runs the rough model on slopes and stairs the same way).
 POLICY_TERRAIN: dict[str, str] = {"mixed": "rough"}
+# Policies train with the goal 2.5 m ahead (paper 4.1); on a longer course (the mixed course, 6.3 m)
+# they see a waypoint at most this far ahead of the base instead of a goal they never met in training.
+TRAINING_GOAL_DISTANCE_M = 2.5
+BASE_X_INDEX, TARGET_X_INDEX = 54, 60  # observation layout, hexbench/env.py
 
 
-def make_policy_controller(config, checkpoints_dir: Path, method: str, terrain: str) -> PolicyController:
-    """What a baseline file's make_controller(task) returns: its shipped weights for the terrain."""
+def make_policy_controller(config, checkpoints_dir: Path, method: str, terrain: str,
+                           target_horizon_m: float | None = None) -> PolicyController:
+    """What a baseline file's make_controller(task) returns: its shipped weights for the terrain.
+
+    For a course without weights of its own (POLICY_TERRAIN) the target horizon defaults to the
+    training goal distance.
+    """
     import torch
 
     torch.set_num_threads(1)
     validate_config(config, method)
+    if terrain in POLICY_TERRAIN and target_horizon_m is None:
+        target_horizon_m = TRAINING_GOAL_DISTANCE_M
     terrain = POLICY_TERRAIN.get(terrain, terrain)
     path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
     policy = load_policy(config, path, entry["sha256"])
-    return PolicyController(config.action_mode, policy, entry["sha256"], path)
+    return PolicyController(config.action_mode, policy, entry["sha256"], path, target_horizon_m)
