@@ -1,0 +1,34 @@
+"""Trained-policy controllers: the waypoint a policy sees on a course longer than training's goal."""
+
+import numpy as np
+
+from hexbench.policy import BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController
+
+
+class RecordingPolicy:
+    def __init__(self):
+        self.seen = []
+
+    def predict(self, obs, deterministic=True):
+        self.seen.append(np.array(obs))
+        return np.zeros(18), None
+
+
+def test_target_is_held_at_most_the_horizon_ahead_of_the_base():
+    policy = RecordingPolicy()
+    ctrl = PolicyController("cpg_residual", policy, target_horizon_m=2.5)
+    obs = np.zeros(62, np.float32)
+    obs[BASE_X_INDEX], obs[TARGET_X_INDEX] = 1.0, 6.3
+    ctrl.act(obs)
+    assert policy.seen[-1][TARGET_X_INDEX] == np.float32(3.5 * OBS_SCALE[TARGET_X_INDEX])
+    assert obs[TARGET_X_INDEX] == np.float32(6.3)  # the caller's observation is untouched
+    obs[BASE_X_INDEX] = 5.0  # within the horizon of the goal: the goal itself
+    ctrl.act(obs)
+    assert policy.seen[-1][TARGET_X_INDEX] == np.float32(6.3 * OBS_SCALE[TARGET_X_INDEX])
+
+
+def test_without_a_horizon_the_observation_passes_unchanged():
+    policy = RecordingPolicy()
+    obs = np.arange(62, dtype=np.float32)
+    PolicyController("cpg_residual", policy).act(obs)
+    np.testing.assert_array_equal(policy.seen[-1], (obs * OBS_SCALE).astype(np.float32))
