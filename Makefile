@@ -16,7 +16,7 @@ $(VENV)/.installed: pyproject.toml
 	touch $@
 
 run: setup
-	$(VENV)/bin/hexbench run baselines/cpg.py
+	$(VENV)/bin/hexbench run baselines/ppo_cpg.py
 
 # Headless Chromium for the leaderboard's browser test (Debian's chromium); the test skips if it cannot be had.
 browser:
