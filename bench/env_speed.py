@@ -106,16 +106,20 @@ def lockstep(env: HexapodEnv, raw: HexapodEnv, steps: int) -> tuple[int, int]:
     return env_ns, raw_ns
 
 
-def measure(terrain: str, steps: int, repeats: int) -> Measurement:
-    level = BENCH_LEVELS[terrain]
-    config = EnvConfig(terrain=terrain, level=level, action_mode="cpg_residual")
+def paired_runs(terrain: str, steps: int, repeats: int, run) -> list[tuple[int, int]]:
+    """`repeats` calls of run(env, raw, steps) on two envs of the terrain's bench level."""
+    config = EnvConfig(terrain=terrain, level=BENCH_LEVELS[terrain], action_mode="cpg_residual")
     env, raw = HexapodEnv(config), HexapodEnv(config)
     try:
-        runs = [lockstep(env, raw, steps) for _ in range(repeats)]
+        return [run(env, raw, steps) for _ in range(repeats)]
     finally:
         env.close()
         raw.close()
-    return Measurement(terrain, level, steps, statistics.median(r[0] for r in runs) / steps / 1e3,
+
+
+def measure(terrain: str, steps: int, repeats: int) -> Measurement:
+    runs = paired_runs(terrain, steps, repeats, lockstep)
+    return Measurement(terrain, BENCH_LEVELS[terrain], steps, statistics.median(r[0] for r in runs) / steps / 1e3,
                        statistics.median(r[1] for r in runs) / steps / 1e3)
 
 
@@ -167,13 +171,7 @@ def floor_lockstep(env: HexapodEnv, raw: HexapodEnv, steps: int) -> tuple[int, i
 
 def measure_floor(terrain: str, steps: int, repeats: int) -> float:
     """Median floor/raw CPU time ratio (see `floor_lockstep`)."""
-    config = EnvConfig(terrain=terrain, level=BENCH_LEVELS[terrain], action_mode="cpg_residual")
-    env, raw = HexapodEnv(config), HexapodEnv(config)
-    try:
-        runs = [floor_lockstep(env, raw, steps) for _ in range(repeats)]
-    finally:
-        env.close()
-        raw.close()
+    runs = paired_runs(terrain, steps, repeats, floor_lockstep)
     return statistics.median(r[0] for r in runs) / statistics.median(r[1] for r in runs)
 
 
