@@ -455,15 +455,28 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
         raise TrainError(f"{run_dir}: no run.json (not a training run directory)")
     if not run.get("checkpoints"):
         raise TrainError(f"{run_dir}: run has no checkpoints yet")
+    selection = None
     if which == "best":
         chosen = best_checkpoint(run)
+    elif which == "heldout":
+        from hexbench.selection import SELECTION_FILE, SelectionError, checkpoint_score, heldout_best
+
+        try:
+            chosen = heldout_best(run_dir, run)
+        except SelectionError as e:
+            raise TrainError(str(e)) from None
+        table = json.loads((run_dir / SELECTION_FILE).read_text())
+        wins, progress_m = checkpoint_score(table["checkpoints"][chosen["sha256"]])
+        selection = {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"],
+                     "episodes_per_level": table["episodes_per_level"], "successes": wins,
+                     "mean_progress_m": round(progress_m, 3), "checkpoints_scored": len(table["checkpoints"])}
     elif which == "last":
         chosen = run["checkpoints"][-1]
     else:
         matches = [c for c in run["checkpoints"] if str(c["env_steps"]) == which]
         if not matches:
             have = ", ".join(str(c["env_steps"]) for c in run["checkpoints"])
-            raise TrainError(f"{run_dir}: no checkpoint {which!r}; valid: best, last, {have}")
+            raise TrainError(f"{run_dir}: no checkpoint {which!r}; valid: best, heldout, last, {have}")
         chosen = matches[0]
     try:
         state = load_policy_weights(run_dir / chosen["file"], chosen["sha256"])
@@ -492,5 +505,7 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
                                                              "curriculum_level_mean", "curriculum_level_max")},
         "published_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
+    if selection is not None:
+        manifest["checkpoints"][key]["selection"] = selection
     write_json_atomic(manifest_path, manifest)
     return manifest["checkpoints"][key]

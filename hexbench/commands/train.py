@@ -52,7 +52,7 @@ def register(app: typer.Typer) -> None:
     @checkpoints.command("publish")
     def publish_command(
         run_dir: Path = typer.Argument(..., help="training run directory (holds run.json)"),
-        which: str = typer.Option("best", "--checkpoint", help="best, last, or the env-step count of one"),
+        which: str = typer.Option("best", "--checkpoint", help="best (training metrics), heldout (best of `checkpoints select`), last, or the env-step count of one"),
         dest: Path = typer.Option(Path("baselines/checkpoints"), "--dest", help="shipped checkpoints folder"),
     ) -> None:
         """Copy a run's checkpoint (policy weights only) into baselines/checkpoints/ with its manifest entry."""
@@ -68,6 +68,42 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(2) from None
         console.print(f"published {dest / entry['file']} ({entry['status']}; sha256 {entry['sha256'][:12]}...)",
                       highlight=False, soft_wrap=True)
+
+    @checkpoints.command("select")
+    def select_command(
+        run_dir: Path = typer.Argument(..., help="training run directory (holds run.json)"),
+        episodes: int = typer.Option(3, "--episodes", help="held-out episodes per selection level"),
+        levels: list[float] = typer.Option([], "--level", help="selection level (repeatable) [default: hexbench.selection.SELECTION_LEVELS]"),
+        stride: int = typer.Option(1, "--stride", help="score every N-th checkpoint (and the last)"),
+        workers: int = typer.Option(1, "--workers", help="processes"),
+    ) -> None:
+        """Score a run's checkpoints by their deterministic policy on held-out episodes (not the protocol's)."""
+        from rich.console import Console
+        from rich.table import Table
+
+        from hexbench.selection import SelectionError, checkpoint_score, select
+
+        console = Console(stderr=True)
+        try:
+            table = select(run_dir, episodes=episodes, levels=tuple(levels) or None, stride=stride, workers=workers)
+        except SelectionError as e:
+            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            raise typer.Exit(2) from None
+        n = len(table["levels"]) * table["episodes_per_level"]
+        out = Table(title=f"{run_dir}: held-out episodes at levels {', '.join(f'{lv:g}' for lv in table['levels'])}")
+        for col in ("env steps", f"successes (of {n})", "mean progress \\[m]", "ends"):
+            out.add_column(col, justify="right")
+        for sha, entry in sorted(table["checkpoints"].items(), key=lambda kv: kv[1]["env_steps"]):
+            wins, progress_m = checkpoint_score(entry)
+            ends: dict[str, int] = {}
+            for e in entry["episodes"]:
+                ends[e["end_reason"]] = ends.get(e["end_reason"], 0) + 1
+            mark = " *" if sha == table["best"]["sha256"] else ""
+            out.add_row(f"{entry['env_steps']}{mark}", str(wins), f"{progress_m:.2f}",
+                        ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
+        Console().print(out)
+        console.print(f"best (*): {table['best']['file']}; ship it with "
+                      f"`hexbench checkpoints publish {run_dir} --checkpoint heldout`", highlight=False, soft_wrap=True)
 
     @checkpoints.command("verify")
     def verify_command(

@@ -1,0 +1,186 @@
+"""Choosing a training run's checkpoint on held-out episodes (`hexbench checkpoints select`).
+
+What training logs (the stochastic policy's success at its own curriculum level) does not say
+which checkpoint's deterministic policy walks best, and trying checkpoints on the protocol's
+episodes would be selecting on the test set. So every checkpoint of a run is scored here by its
+deterministic policy (what `hexbench run` evaluates) on held-out episodes:
+
+  - the protocol's rules (step limit, corridor, fall, stall; observation noise on) at fixed
+    selection levels per terrain, near where the open-loop CPG starts to fail (SELECTION_LEVELS);
+  - seeds from the "heldout" namespace: episode_seed("heldout", terrain, level, i), which no
+    protocol version uses (protocol seeds are derived from "v1", "v2", ...).
+
+Score of a checkpoint: (successes, mean forward progress [m]) over those episodes, compared in that
+order. Results are cached in RUN_DIR/selection.json by checkpoint sha256, so selecting again only
+evaluates checkpoints it has not seen; `hexbench checkpoints publish --checkpoint heldout` ships
+the best-scored one.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, replace
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+HELDOUT_NAMESPACE = "heldout"
+SELECTION_FILE = "selection.json"
+# Two levels per terrain in the upper half of paper Table 4, where the open-loop CPG's success
+# falls off (leaderboard/cpg.json): improvements show there, and easy levels add no information.
+SELECTION_LEVELS: dict[str, tuple[float, ...]] = {"rough": (9.0, 11.0), "slopes": (13.0, 15.0), "stairs": (7.0, 8.0)}
+
+
+class SelectionError(Exception):
+    """Bad selection input (run directory, levels); the message is one line."""
+
+
+@dataclass(frozen=True)
+class EpisodeOutcome:
+    success: bool
+    progress_m: float
+    end_reason: str
+
+
+def heldout_seeds(terrain: str, level: float, episodes: int) -> list[int]:
+    from hexbench.tasks import episode_seed
+
+    return [episode_seed(HELDOUT_NAMESPACE, terrain, level, i) for i in range(episodes)]
+
+
+def _run_config(run: dict):
+    """The baseline CONFIG a run was trained with (its file's dataclass, with the run's values)."""
+    from hexbench.train import TrainError, load_baseline_config
+
+    try:
+        base = load_baseline_config(Path(run["baseline_file"]))
+    except TrainError as e:
+        raise SelectionError(str(e)) from None
+    values = {k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()}
+    return replace(base, **values)
+
+
+def play_episode(policy, config, terrain: str, level: float, seed: int) -> EpisodeOutcome:
+    """One deterministic episode of `policy` under the protocol's rules at (terrain, level)."""
+    from hexbench.env import HexapodEnv
+    from hexbench.policy import PolicyController
+    from hexbench.tasks import load_suite
+
+    task = load_suite().task(terrain, level)
+    env = HexapodEnv(task.env_config(config.action_mode, residual_scale=config.residual_scale))
+    try:
+        controller = PolicyController(config.action_mode, policy)
+        obs, _ = env.reset(seed=seed)
+        controller.reset(seed)
+        while True:
+            obs, _, terminated, truncated, info = env.step(controller.act(obs))
+            if terminated or truncated:
+                return EpisodeOutcome(info["end_reason"] == "success", float(info["progress_m"]), info["end_reason"])
+    finally:
+        env.close()
+
+
+def _score_job(job: tuple) -> tuple[str, float, int, dict]:
+    import torch
+
+    from hexbench.policy import CheckpointError, load_policy
+
+    torch.set_num_threads(1)
+    run, run_dir, ckpt, level, seed = job
+    config = _run_config(run)
+    try:
+        policy = load_policy(config, Path(run_dir) / ckpt["file"], ckpt["sha256"])
+    except CheckpointError as e:
+        return ckpt["sha256"], level, seed, {"error": str(e)}
+    out = play_episode(policy, config, run["terrain"], level, seed)
+    return ckpt["sha256"], level, seed, {"success": out.success, "progress_m": round(out.progress_m, 4),
+                                         "end_reason": out.end_reason}
+
+
+def checkpoint_score(entry: dict) -> tuple[int, float]:
+    """(successes, mean progress [m]) of one checkpoint's held-out episodes."""
+    episodes = entry["episodes"]
+    progress = [e["progress_m"] for e in episodes]
+    return sum(e["success"] for e in episodes), float(np.mean(progress)) if progress else -math.inf
+
+
+def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None = None, stride: int = 1,
+           workers: int = 1, progress: bool = True) -> dict:
+    """Score the run's checkpoints (every `stride`-th, always the last) on held-out episodes.
+
+    Returns the selection table ({"levels", "episodes_per_level", "checkpoints": {sha256: entry}, "best"})
+    and writes it to RUN_DIR/selection.json.
+    """
+    from hexbench.train import read_run, write_json_atomic
+
+    run_dir = Path(run_dir)
+    run = read_run(run_dir)
+    if run is None:
+        raise SelectionError(f"{run_dir}: no run.json (not a training run directory)")
+    ckpts = run.get("checkpoints") or []
+    if not ckpts:
+        raise SelectionError(f"{run_dir}: run has no checkpoints yet")
+    terrain = run["terrain"]
+    levels = tuple(levels) if levels else SELECTION_LEVELS[terrain]
+    from hexbench.tasks import load_suite
+
+    valid = load_suite().levels(terrain)
+    bad = [lv for lv in levels if lv not in valid]
+    if bad:
+        raise SelectionError(f"level {bad[0]:g} is not a {terrain} level; valid levels: {', '.join(f'{v:g}' for v in valid)}")
+    if episodes < 1 or stride < 1 or workers < 1:
+        raise SelectionError("--episodes, --stride and --workers must be >= 1")
+    chosen = ckpts[::stride]
+    if chosen[-1] is not ckpts[-1]:
+        chosen.append(ckpts[-1])
+
+    path = run_dir / SELECTION_FILE
+    table = json.loads(path.read_text()) if path.exists() else {}
+    if table.get("levels") != list(levels) or table.get("episodes_per_level") != episodes:
+        table = {"namespace": HELDOUT_NAMESPACE, "levels": list(levels), "episodes_per_level": episodes,
+                 "checkpoints": {}}
+    todo = [c for c in chosen if c["sha256"] not in table["checkpoints"]]
+    jobs = [(run, str(run_dir), c, lv, s) for c in todo for lv in levels for s in heldout_seeds(terrain, lv, episodes)]
+    results: dict[str, list[dict]] = {c["sha256"]: [] for c in todo}
+
+    from rich.progress import Progress
+
+    with Progress(disable=not progress, transient=True) as bar:
+        task = bar.add_task(f"held-out episodes ({len(todo)} checkpoints)", total=len(jobs))
+        if workers == 1:
+            outcomes = map(_score_job, jobs)
+            pool = None
+        else:
+            pool = get_context("spawn").Pool(workers)
+            outcomes = pool.imap_unordered(_score_job, jobs)
+        try:
+            for sha, level, seed, outcome in outcomes:
+                if "error" in outcome:
+                    raise SelectionError(outcome["error"])
+                results[sha].append({"level": level, "seed": seed, **outcome})
+                bar.advance(task)
+        finally:
+            if pool is not None:
+                pool.terminate()
+    for c in todo:
+        eps = sorted(results[c["sha256"]], key=lambda e: (e["level"], e["seed"]))
+        table["checkpoints"][c["sha256"]] = {"file": c["file"], "env_steps": c["env_steps"], "episodes": eps}
+    scored = [c for c in ckpts if c["sha256"] in table["checkpoints"]]
+    best = max(scored, key=lambda c: (checkpoint_score(table["checkpoints"][c["sha256"]]), -c["env_steps"]))
+    table["best"] = {"file": best["file"], "env_steps": best["env_steps"], "sha256": best["sha256"]}
+    write_json_atomic(path, table)
+    return table
+
+
+def heldout_best(run_dir: Path, run: dict) -> dict:
+    """The run's checkpoint entry that `select` scored best; SelectionError if never selected."""
+    path = Path(run_dir) / SELECTION_FILE
+    if not path.exists():
+        raise SelectionError(f"{run_dir}: no {SELECTION_FILE}; run `hexbench checkpoints select {run_dir}` first")
+    best = json.loads(path.read_text()).get("best") or {}
+    for c in run["checkpoints"]:
+        if c["sha256"] == best.get("sha256"):
+            return c
+    raise SelectionError(f"{path}: its best checkpoint is not in run.json (stale selection); select again")
