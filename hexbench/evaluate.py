@@ -216,7 +216,18 @@ def _camera_channel(ctrl, env: HexapodEnv, where: str, timeout_s: float):
     return see
 
 
-def _worker_init() -> None:
+def _exit_when_orphaned(parent_pid: int, poll_s: float = 1.0) -> None:
+    """Worker-side watchdog: exit as soon as the evaluating process is gone (killed by SIGTERM or
+    SIGKILL, it cannot shut its pool down; without this its spawn workers would wait forever)."""
+    while os.getppid() == parent_pid:
+        time.sleep(poll_s)
+    os._exit(1)
+
+
+def _worker_init(parent_pid: int) -> None:
+    import threading
+
+    threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True, name="orphan-watchdog").start()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     try:
         import torch
@@ -369,7 +380,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
                     bar.advance(task_bar)
             else:
                 with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                                         initializer=_worker_init) as pool:
+                                         initializer=_worker_init, initargs=(os.getpid(),)) as pool:
                     futures = {pool.submit(run_episode, job): job for job in todo}
                     pending = set(futures)
                     while pending:

@@ -142,6 +142,27 @@ def test_interrupted_run_resumes_to_the_same_record(tmp_path):
     assert _strip_timing(resumed) == _strip_timing(reference)
 
 
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
+def test_killed_run_leaves_no_worker_processes(tmp_path, sig):
+    import psutil
+
+    proc = subprocess.Popen([sys.executable, "-m", "hexbench.cli", "run", CPG, "--terrain", "stairs", "--levels", "2",
+                             "--episodes", "4", "--workers", "2", "--no-record", "--out", str(tmp_path / "run")],
+                            cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    workers = []
+    while time.time() < deadline and len(workers) < 2:  # both spawn workers up (multiprocessing's tracker aside)
+        workers = [c for c in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(c.cmdline())]
+        time.sleep(0.2)
+    assert len(workers) == 2
+    time.sleep(1.0)  # inside their first episodes
+    proc.send_signal(sig)
+    proc.wait(timeout=30)
+    _, alive = psutil.wait_procs(workers, timeout=10)
+    assert not alive, f"{len(alive)} worker process(es) outlived the killed run"
+    assert not (tmp_path / "run" / "result.json").exists()
+
+
 def test_two_workers_give_the_same_record_as_one(tmp_path):
     task = replace(load_suite("v1").task("rough", 8), episodes=3, max_steps=90)
     one = evaluate(CPG, [task], tmp_path / "w1", workers=1, record=False, progress=False).record
