@@ -466,7 +466,7 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
         except SelectionError as e:
             raise TrainError(str(e)) from None
         table = json.loads((run_dir / SELECTION_FILE).read_text())
-        wins, progress_m = checkpoint_score(table["checkpoints"][chosen["sha256"]])
+        wins, progress_m = checkpoint_score(table["checkpoints"][chosen["sha256"]], table["goal_distance_m"])
         selection = {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"],
                      "episodes_per_level": table["episodes_per_level"], "successes": wins,
                      "mean_progress_m": round(progress_m, 3), "checkpoints_scored": len(table["checkpoints"])}

@@ -75,6 +75,7 @@ def register(app: typer.Typer) -> None:
         episodes: int = typer.Option(3, "--episodes", help="held-out episodes per selection level"),
         levels: list[float] = typer.Option([], "--level", help="selection level (repeatable) [default: hexbench.selection.SELECTION_LEVELS]"),
         stride: int = typer.Option(1, "--stride", help="score every N-th checkpoint (and the last)"),
+        max_env_steps: int = typer.Option(None, "--max-env-steps", help="score no checkpoint beyond this many env steps"),
         workers: int = typer.Option(1, "--workers", help="processes"),
     ) -> None:
         """Score a run's checkpoints by their deterministic policy on held-out episodes (not the protocol's)."""
@@ -85,7 +86,8 @@ def register(app: typer.Typer) -> None:
 
         console = Console(stderr=True)
         try:
-            table = select(run_dir, episodes=episodes, levels=tuple(levels) or None, stride=stride, workers=workers)
+            table = select(run_dir, episodes=episodes, levels=tuple(levels) or None, stride=stride,
+                           max_env_steps=max_env_steps, workers=workers)
         except SelectionError as e:
             console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
@@ -94,7 +96,7 @@ def register(app: typer.Typer) -> None:
         for col in ("env steps", f"successes (of {n})", "mean progress \\[m]", "ends"):
             out.add_column(col, justify="right")
         for sha, entry in sorted(table["checkpoints"].items(), key=lambda kv: kv[1]["env_steps"]):
-            wins, progress_m = checkpoint_score(entry)
+            wins, progress_m = checkpoint_score(entry, table["goal_distance_m"])
             ends: dict[str, int] = {}
             for e in entry["episodes"]:
                 ends[e["end_reason"]] = ends.get(e["end_reason"], 0) + 1
