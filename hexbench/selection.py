@@ -10,10 +10,10 @@ deterministic policy (what `hexbench run` evaluates) on held-out episodes:
   - seeds from the "heldout" namespace: episode_seed("heldout", terrain, level, i), which no
     protocol version uses (protocol seeds are derived from "v1", "v2", ...).
 
-Score of a checkpoint: (successes, mean forward progress [m] with each episode's progress capped at
-the goal distance) over those episodes, compared in that order; equal scores go to the checkpoint
-with fewer env steps. Results are cached in RUN_DIR/selection.json by checkpoint sha256, so selecting again only
-evaluates checkpoints it has not seen; `hexbench checkpoints publish --checkpoint heldout` ships
+Rank of a checkpoint: the 95% Wilson lower bound of its held-out success rate, then its mean forward
+progress [m] with each episode capped at the goal distance, then more episodes, then fewer env
+steps. Episodes are kept in RUN_DIR/selection.json by checkpoint sha256, so selecting again only
+plays what is missing (new checkpoints, or more episodes for the front-runners with --top); `hexbench checkpoints publish --checkpoint heldout` ships
 the best-scored one.
 """
 
@@ -101,21 +101,30 @@ def _score_job(job: tuple) -> tuple[str, float, int, dict]:
                                          "end_reason": out.end_reason}
 
 
-def checkpoint_score(entry: dict, goal_distance_m: float) -> tuple[int, float]:
-    """(successes, mean progress [m], each capped at the goal distance) of one checkpoint's held-out episodes."""
+def checkpoint_score(entry: dict, goal_distance_m: float) -> tuple[float, float, int]:
+    """How a checkpoint ranks: (95% Wilson lower bound of its held-out success rate, mean progress [m]
+    with each episode capped at the goal distance, episodes played). The lower bound makes 19 of 20
+    outrank 3 of 3, so a checkpoint lucky on few episodes does not win."""
+    from hexbench.scoring import wilson_interval
+
     episodes = entry["episodes"]
+    if not episodes:
+        return -1.0, -math.inf, 0
+    wins = sum(e["success"] for e in episodes)
     progress = [min(e["progress_m"], goal_distance_m) for e in episodes]
-    return sum(e["success"] for e in episodes), float(np.mean(progress)) if progress else -math.inf
+    return wilson_interval(wins, len(episodes))[0], float(np.mean(progress)), len(episodes)
 
 
 def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None = None, stride: int = 1,
-           max_env_steps: int | None = None, workers: int = 1, progress: bool = True) -> dict:
-    """Score the run's checkpoints (every `stride`-th, always the last, none beyond `max_env_steps`)
-    on held-out episodes.
+           max_env_steps: int | None = None, top: int | None = None, workers: int = 1,
+           progress: bool = True) -> dict:
+    """Play held-out episodes for the run's checkpoints until each chosen one has `episodes` per level.
 
-    Returns the selection table ({"levels", "episodes_per_level", "checkpoints": {sha256: entry}, "best"})
-    and writes it to RUN_DIR/selection.json.
+    Chosen: every `stride`-th checkpoint and the last, none beyond `max_env_steps`; with `top`, only
+    the `top` best-scored so far (to give the front-runners more episodes). Episodes already in
+    RUN_DIR/selection.json are kept (a change of levels starts afresh). Returns the table it writes.
     """
+    from hexbench.tasks import load_suite
     from hexbench.train import read_run, write_json_atomic
 
     run_dir = Path(run_dir)
@@ -127,38 +136,42 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         raise SelectionError(f"{run_dir}: run has no checkpoints yet")
     terrain = run["terrain"]
     levels = tuple(levels) if levels else SELECTION_LEVELS[terrain]
-    from hexbench.tasks import load_suite
-
     valid = load_suite().levels(terrain)
     bad = [lv for lv in levels if lv not in valid]
     if bad:
         raise SelectionError(f"level {bad[0]:g} is not a {terrain} level; valid levels: {', '.join(f'{v:g}' for v in valid)}")
-    if episodes < 1 or stride < 1 or workers < 1:
-        raise SelectionError("--episodes, --stride and --workers must be >= 1")
+    if episodes < 1 or stride < 1 or workers < 1 or (top is not None and top < 1):
+        raise SelectionError("--episodes, --stride, --top and --workers must be >= 1")
+
+    path = run_dir / SELECTION_FILE
+    table = json.loads(path.read_text()) if path.exists() else {}
+    if table.get("levels") != list(levels):
+        table = {"namespace": HELDOUT_NAMESPACE, "levels": list(levels), "checkpoints": {}}
+    table["goal_distance_m"] = goal_m = load_suite().task(terrain, levels[0]).goal_distance_m
+    scores = table["checkpoints"]
+
     if max_env_steps is not None:
         ckpts = [c for c in ckpts if c["env_steps"] <= max_env_steps] or ckpts[:1]
     chosen = ckpts[::stride]
     if chosen[-1] is not ckpts[-1]:
         chosen.append(ckpts[-1])
-
-    path = run_dir / SELECTION_FILE
-    table = json.loads(path.read_text()) if path.exists() else {}
-    goal_m = load_suite().task(terrain, levels[0]).goal_distance_m
-    if table.get("levels") != list(levels) or table.get("episodes_per_level") != episodes:
-        table = {"namespace": HELDOUT_NAMESPACE, "levels": list(levels), "episodes_per_level": episodes,
-                 "checkpoints": {}}
-    table["goal_distance_m"] = goal_m
-    todo = [c for c in chosen if c["sha256"] not in table["checkpoints"]]
-    jobs = [(run, str(run_dir), c, lv, s) for c in todo for lv in levels for s in heldout_seeds(terrain, lv, episodes)]
-    results: dict[str, list[dict]] = {c["sha256"]: [] for c in todo}
+    if top is not None:
+        ranked = sorted((c for c in chosen if c["sha256"] in scores),
+                        key=lambda c: (checkpoint_score(scores[c["sha256"]], goal_m), -c["env_steps"]), reverse=True)
+        chosen = ranked[:top]
+    jobs = []
+    for c in chosen:
+        have = {(e["level"], e["seed"]) for e in scores.get(c["sha256"], {}).get("episodes", [])}
+        jobs += [(run, str(run_dir), c, lv, seed) for lv in levels for seed in heldout_seeds(terrain, lv, episodes)
+                 if (lv, seed) not in have]
+        scores.setdefault(c["sha256"], {"file": c["file"], "env_steps": c["env_steps"], "episodes": []})
 
     from rich.progress import Progress
 
     with Progress(disable=not progress, transient=True) as bar:
-        task = bar.add_task(f"held-out episodes ({len(todo)} checkpoints)", total=len(jobs))
+        task = bar.add_task(f"held-out episodes ({len(chosen)} checkpoints)", total=len(jobs))
         if workers == 1:
-            outcomes = map(_score_job, jobs)
-            pool = None
+            outcomes, pool = map(_score_job, jobs), None
         else:
             pool = get_context("spawn").Pool(workers)
             outcomes = pool.imap_unordered(_score_job, jobs)
@@ -166,16 +179,15 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
             for sha, level, seed, outcome in outcomes:
                 if "error" in outcome:
                     raise SelectionError(outcome["error"])
-                results[sha].append({"level": level, "seed": seed, **outcome})
+                scores[sha]["episodes"].append({"level": level, "seed": seed, **outcome})
                 bar.advance(task)
         finally:
             if pool is not None:
                 pool.terminate()
-    for c in todo:
-        eps = sorted(results[c["sha256"]], key=lambda e: (e["level"], e["seed"]))
-        table["checkpoints"][c["sha256"]] = {"file": c["file"], "env_steps": c["env_steps"], "episodes": eps}
-    scored = [c for c in run["checkpoints"] if c["sha256"] in table["checkpoints"]]
-    best = max(scored, key=lambda c: (checkpoint_score(table["checkpoints"][c["sha256"]], goal_m), -c["env_steps"]))
+    for entry in scores.values():
+        entry["episodes"].sort(key=lambda e: (e["level"], e["seed"]))
+    scored = [c for c in run["checkpoints"] if scores.get(c["sha256"], {}).get("episodes")]
+    best = max(scored, key=lambda c: (checkpoint_score(scores[c["sha256"]], goal_m), -c["env_steps"]))
     table["best"] = {"file": best["file"], "env_steps": best["env_steps"], "sha256": best["sha256"]}
     write_json_atomic(path, table)
     return table

@@ -466,10 +466,12 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
         except SelectionError as e:
             raise TrainError(str(e)) from None
         table = json.loads((run_dir / SELECTION_FILE).read_text())
-        wins, progress_m = checkpoint_score(table["checkpoints"][chosen["sha256"]], table["goal_distance_m"])
-        selection = {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"],
-                     "episodes_per_level": table["episodes_per_level"], "successes": wins,
-                     "mean_progress_m": round(progress_m, 3), "checkpoints_scored": len(table["checkpoints"])}
+        entry = table["checkpoints"][chosen["sha256"]]
+        lower, progress_m, n = checkpoint_score(entry, table["goal_distance_m"])
+        selection = {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"], "episodes": n,
+                     "successes": sum(e["success"] for e in entry["episodes"]),
+                     "success_rate_lower_95": round(lower, 3), "mean_progress_m": round(progress_m, 3),
+                     "checkpoints_scored": len(table["checkpoints"])}
     elif which == "last":
         chosen = run["checkpoints"][-1]
     else:

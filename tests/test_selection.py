@@ -36,11 +36,20 @@ def test_select_scores_new_checkpoints_then_publish_ships_the_best(tmp_path):
     assert sorted(c["env_steps"] for c in table["checkpoints"].values()) == [64, 128]
     assert table["checkpoints"][first_sha] == first
 
+    # More episodes for the front-runner only: its first episode is kept, one more is played.
+    assert run_cli("checkpoints", "select", out, "--episodes", "2", "--level", "2", "--top", "1").exit_code == 0
+    table = json.loads((out / "selection.json").read_text())
+    counts = sorted(len(c["episodes"]) for c in table["checkpoints"].values())
+    assert counts == [1, 2]
+    topped = next(c for c in table["checkpoints"].values() if len(c["episodes"]) == 2)
+    assert sorted(e["seed"] for e in topped["episodes"]) == sorted(heldout_seeds("stairs", 2.0, 2))
+
     result = run_cli("checkpoints", "publish", out, "--checkpoint", "heldout", "--dest", dest)
     assert result.exit_code == 0, result.output
     entry = json.loads((dest / "manifest.json").read_text())["checkpoints"]["ppo_cpg-stairs"]
     assert entry["source_checkpoint_sha256"] == table["best"]["sha256"]
     assert entry["selection"]["levels"] == [2.0] and entry["selection"]["checkpoints_scored"] == 2
+    assert entry["selection"]["episodes"] == len(table["checkpoints"][table["best"]["sha256"]]["episodes"])
 
 
 def test_select_bad_level_and_publish_without_selection_give_one_line(tmp_path):

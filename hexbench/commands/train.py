@@ -76,6 +76,7 @@ def register(app: typer.Typer) -> None:
         levels: list[float] = typer.Option([], "--level", help="selection level (repeatable) [default: hexbench.selection.SELECTION_LEVELS]"),
         stride: int = typer.Option(1, "--stride", help="score every N-th checkpoint (and the last)"),
         max_env_steps: int = typer.Option(None, "--max-env-steps", help="score no checkpoint beyond this many env steps"),
+        top: int = typer.Option(None, "--top", help="only the N best-scored so far (top them up to --episodes)"),
         workers: int = typer.Option(1, "--workers", help="processes"),
     ) -> None:
         """Score a run's checkpoints by their deterministic policy on held-out episodes (not the protocol's)."""
@@ -87,22 +88,21 @@ def register(app: typer.Typer) -> None:
         console = Console(stderr=True)
         try:
             table = select(run_dir, episodes=episodes, levels=tuple(levels) or None, stride=stride,
-                           max_env_steps=max_env_steps, workers=workers)
+                           max_env_steps=max_env_steps, top=top, workers=workers)
         except SelectionError as e:
             console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
-        n = len(table["levels"]) * table["episodes_per_level"]
         out = Table(title=f"{run_dir}: held-out episodes at levels {', '.join(f'{lv:g}' for lv in table['levels'])}")
-        for col in ("env steps", f"successes (of {n})", "mean progress \\[m]", "ends"):
+        for col in ("env steps", "successes", "rate, 95% lower bound", "mean progress \\[m]", "ends"):
             out.add_column(col, justify="right")
         for sha, entry in sorted(table["checkpoints"].items(), key=lambda kv: kv[1]["env_steps"]):
-            wins, progress_m = checkpoint_score(entry, table["goal_distance_m"])
+            lower, progress_m, n = checkpoint_score(entry, table["goal_distance_m"])
             ends: dict[str, int] = {}
             for e in entry["episodes"]:
                 ends[e["end_reason"]] = ends.get(e["end_reason"], 0) + 1
             mark = " *" if sha == table["best"]["sha256"] else ""
-            out.add_row(f"{entry['env_steps']}{mark}", str(wins), f"{progress_m:.2f}",
-                        ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
+            out.add_row(f"{entry['env_steps']}{mark}", f"{sum(e['success'] for e in entry['episodes'])}/{n}",
+                        f"{lower:.2f}", f"{progress_m:.2f}", ", ".join(f"{k} {v}" for k, v in sorted(ends.items())))
         Console().print(out)
         console.print(f"best (*): {table['best']['file']}; ship it with "
                       f"`hexbench checkpoints publish {run_dir} --checkpoint heldout`", highlight=False, soft_wrap=True)
