@@ -305,27 +305,28 @@ class RunResult:
     error: str | None = None
 
 
-def _checkpoints_used(controller_file: str, tasks: list[TaskSpec], first_ctrl) -> list[dict]:
-    """Path and sha256 of every weights file the controller loads for the tasks' terrains.
+def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], first_ctrl) -> dict[str, list[dict]]:
+    """Per terrain, path and sha256 of every weights file the controller loads for it.
 
     A controller lists them in an optional `checkpoint_paths` attribute (the trained baselines
     do); one controller per terrain is built here, since baselines load per-terrain weights.
     """
-    seen: dict[str, dict] = {}
     ctrls = {tasks[0].terrain: first_ctrl}
     for task in tasks:
         if task.terrain not in ctrls:
             ctrls[task.terrain] = make_controller(controller_file, task)
-    for ctrl in ctrls.values():
+    used: dict[str, list[dict]] = {}
+    for terrain, ctrl in ctrls.items():
+        files = {}
         for path in getattr(ctrl, "checkpoint_paths", []) or []:
             path = Path(path).resolve()
             try:
                 shown = str(path.relative_to(Path.cwd()))
             except ValueError:
                 shown = str(path)
-            if shown not in seen:
-                seen[shown] = {"path": shown, "sha256": file_sha256(path)}
-    return [seen[k] for k in sorted(seen)]
+            files[shown] = {"path": shown, "sha256": file_sha256(path)}
+        used[terrain] = [files[k] for k in sorted(files)]
+    return used
 
 
 def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | Path, *, episodes: int | None = None,
@@ -339,7 +340,9 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     # Load once here: a file that fails to import or build fails before any worker starts.
     ctrl = make_controller(controller_file, tasks[0])
     action_mode = ctrl.action_mode
-    checkpoints = _checkpoints_used(controller_file, tasks, ctrl)
+    weights = _weights_by_terrain(controller_file, tasks, ctrl)
+    checkpoints = sorted({w["path"]: w for ws in weights.values() for w in ws}.values(), key=lambda w: w["path"])
+    weight_shas = {terrain: sorted(w["sha256"] for w in ws) for terrain, ws in weights.items()}
     sha = file_sha256(controller_file)
     created_out = not out.exists()
     journal = out / ".journal"
@@ -352,7 +355,9 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
         f = journal / f"{job.episode_id}.json"
         if f.exists():
             entry = json.loads(f.read_text())
+            # resumed only if made by the same controller file with the same weights for its terrain
             if entry.get("controller_sha256") == sha and entry.get("protocol") == job.task.protocol \
+                    and sorted(w["sha256"] for w in entry.get("weights", [])) == weight_shas[job.task.terrain] \
                     and entry["row"]["seed"] == job.seed and (not record or "mcap_path" in entry["row"]):
                 done[job.episode_id] = entry["row"]
     todo = [j for j in jobs if j.episode_id not in done]
@@ -363,7 +368,8 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
 
     def _journal(job: EpisodeJob, row: dict) -> None:
         f = journal / f"{job.episode_id}.json"
-        _atomic_write_text(f, json.dumps({"controller_sha256": sha, "protocol": job.task.protocol, "row": row}))
+        _atomic_write_text(f, json.dumps({"controller_sha256": sha, "protocol": job.task.protocol,
+                                          "weights": weights[job.task.terrain], "row": row}))
         written.append(f)
         done[job.episode_id] = row
 

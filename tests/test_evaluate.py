@@ -222,3 +222,33 @@ def test_record_lists_the_weights_files_a_trained_baseline_loads(tmp_path):
     weights = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
     assert [Path(c["path"]).resolve() for c in listed] == [weights.resolve()]
     assert listed[0]["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
+
+
+def test_resume_reruns_episodes_whose_weights_changed(tmp_path):
+    weights = tmp_path / "weights.bin"
+    weights.write_bytes(b"first weights")
+    ctrl_file = tmp_path / "weighted.py"
+    ctrl_file.write_text(
+        "import numpy as np\n"
+        "from pathlib import Path\n"
+        "class Weighted:\n"
+        "    action_mode = 'cpg_residual'\n"
+        "    checkpoint_paths = [Path(__file__).with_name('weights.bin')]\n"
+        "    def reset(self, seed):\n"
+        "        pass\n"
+        "    def act(self, obs):\n"
+        "        return np.zeros(18, dtype=np.float32)\n"
+        "def make_controller(task):\n"
+        "    return Weighted()\n")
+    task = replace(load_suite("v1").task("stairs", 2), episodes=1, max_steps=30)
+    out = tmp_path / "run"
+    evaluate(str(ctrl_file), [task], out, workers=1, record=False, progress=False)
+    journal = next((out / ".journal").glob("*.json"))
+    first = journal.stat().st_mtime_ns
+    evaluate(str(ctrl_file), [task], out, workers=1, record=False, progress=False)
+    assert journal.stat().st_mtime_ns == first  # same weights: the episode is not run again
+    weights.write_bytes(b"retrained weights")
+    res = evaluate(str(ctrl_file), [task], out, workers=1, record=False, progress=False)
+    assert journal.stat().st_mtime_ns != first  # new weights: run again, not mixed into the record
+    sha = res.record["controller"]["checkpoints"][0]["sha256"]
+    assert json.loads(journal.read_text())["weights"][0]["sha256"] == sha
