@@ -1,0 +1,83 @@
+"""Sample efficiency of one method against another (issue 5): env steps to reach a curriculum level.
+
+"The same success on the same terrain level" is read through the paper's curriculum: a run reaches
+level L when one of its envs has made 20 successful arrivals at every level below L (section 4.1).
+For each run (a training run directory or a progress CSV with its .run.json beside it) this prints
+the first logged env-step count at which the curriculum level is >= L. A run that never got there
+is censored: it needed more than its last logged step count, and a ratio built on it is a lower
+bound (printed with ">").
+
+    python bench/sample_efficiency.py --level 6 training/ppo_cpg-rough-seed0-v2 training/ppo-rough-seed0-v2
+    python bench/sample_efficiency.py --level 6 --reference ppo leaderboard/curves/*rough*.csv
+
+Ratio = median steps of the reference method / median steps of each other method (> 1: the other
+method needs fewer env steps). Progress rows are written once a minute, so a step count is exact
+to about one minute of training.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+from pathlib import Path
+
+import pandas as pd
+
+
+def load(source: Path) -> tuple[pd.DataFrame, dict]:
+    source = Path(source)
+    csv_path, run_path = ((source / "progress.csv", source / "run.json") if source.is_dir()
+                          else (source, source.with_suffix(".run.json")))
+    if not csv_path.is_file() or not run_path.is_file():
+        sys.exit(f"{source}: needs a progress CSV and its run.json (looked for {csv_path} and {run_path})")
+    return pd.read_csv(csv_path), json.loads(run_path.read_text())
+
+
+def steps_to_level(progress: pd.DataFrame, level: float) -> tuple[int, bool]:
+    """(env steps, reached): first logged env steps with curriculum level >= level, else the last logged."""
+    per_step = progress.groupby("env_steps")["curriculum_level"].max()
+    reached = per_step[per_step >= level - 1e-9]
+    if len(reached):
+        return int(reached.index[0]), True
+    return int(per_step.index.max()), False
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("sources", nargs="+", type=Path)
+    ap.add_argument("--level", type=float, default=6.0, help="curriculum level to reach (paper units)")
+    ap.add_argument("--reference", default="ppo", help="method the others are compared with")
+    args = ap.parse_args()
+
+    by_method: dict[tuple[str, str], list[tuple[int, bool, str]]] = {}
+    for source in args.sources:
+        progress, run = load(source)
+        steps, reached = steps_to_level(progress, args.level)
+        # runs are only compared under the same training reward (early-end penalty on or off)
+        key = (run["method"], run["terrain"], bool(run["config"].get("early_end_penalty", False)))
+        by_method.setdefault(key, []).append((steps, reached, str(source)))
+        mark = "" if reached else " (not reached: censored)"
+        print(f"{run['method']:>8} {run['terrain']:<7} seed {run['seed']} (penalty {'on' if key[2] else 'off'}): "
+              f"{'' if reached else '>'}{steps:,} env steps to level {args.level:g}{mark}  [{source}]")
+
+    for (method, terrain, penalty), runs in sorted(by_method.items()):
+        if method == args.reference or (args.reference, terrain, penalty) not in by_method:
+            continue
+        ref = by_method[(args.reference, terrain, penalty)]
+        ref_median = statistics.median(s for s, _, _ in ref)
+        median = statistics.median(s for s, _, _ in runs)
+        ref_censored = not all(r for _, r, _ in ref)
+        censored = not all(r for _, r, _ in runs)
+        if censored and not ref_censored:
+            print(f"{terrain} (penalty {'on' if penalty else 'off'}): {method} has runs that never reached level {args.level:g}; no ratio")
+            continue
+        bound = ">" if ref_censored else ""
+        print(f"{terrain} (early-end penalty {'on' if penalty else 'off'}): {args.reference} / {method} = {bound}{ref_median / median:.1f}x "
+              f"(median env steps to level {args.level:g}: {args.reference} {bound}{ref_median:,.0f} over {len(ref)} run(s), "
+              f"{method} {median:,.0f} over {len(runs)} run(s))")
+
+
+if __name__ == "__main__":
+    main()
