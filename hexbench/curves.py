@@ -4,8 +4,8 @@
 
 Each run directory contributes one line per panel: at every logged env-step count, the mean over
 its envs of the mean episode reward of their last 20 episodes, and the mean curriculum level. A run
-that has not reached its env-step budget is labelled "partial: N of M steps". The CSVs plotted are
-copied next to the PNG as <method>-<terrain>-seed<S>.csv, so the figure can be regenerated from
+that has not reached its env-step budget is labelled "partial: N of M steps", one trained without
+the early-end penalty says so. The CSVs plotted are copied next to the PNG as <run directory name>.csv, so the figure can be regenerated from
 committed data alone (`hexbench curves leaderboard/curves/*.csv`).
 """
 
@@ -48,6 +48,8 @@ def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
         episodes=("episodes", "sum"))
     if run:
         label = f"{run['method']} {run['terrain']} seed {run['seed']}"
+        if not (run.get("config") or {}).get("early_end_penalty", False):
+            label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
         if run.get("env_steps", 0) < run.get("total_steps", 0) or agg["env_steps"].max() < run.get("total_steps", 0):
             label += f" (partial: {int(agg['env_steps'].max()):,} of {run['total_steps']:,} steps)"
     else:
@@ -88,7 +90,7 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
         for source, (_agg, _label, run) in zip(sources, loaded):
             source = Path(source)
             if source.is_dir() and run:
-                stem = f"{run['method']}-{run['terrain']}-seed{run['seed']}"
+                stem = source.resolve().name  # the run directory's name: unique, unlike method-terrain-seed
                 dest = out_png.parent / f"{stem}.csv"
                 shutil.copyfile(source / "progress.csv", dest)
                 summary = {k: run.get(k) for k in ("method", "terrain", "seed", "workers", "total_steps", "env_steps",

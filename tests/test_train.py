@@ -162,7 +162,8 @@ def test_epsilon_sweep_and_learning_curves(tmp_path):
     result = run_cli("curves", sweep_dir / "eps0.20-trial0", sweep_dir / "eps0.60-trial0", "--out", png)
     assert result.exit_code == 0, result.output
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert (png.parent / "ppo_cpg-stairs-seed0.csv").is_file()
+    # one CSV per run, named by its directory (both runs are ppo_cpg stairs seed 0)
+    assert (png.parent / "eps0.20-trial0.csv").is_file() and (png.parent / "eps0.60-trial0.csv").is_file()
     bad = run_cli("curves", tmp_path / "nowhere", "--out", png)
     assert bad.exit_code == 2 and "no progress CSV" in bad.output
 
