@@ -203,3 +203,24 @@ def heldout_best(run_dir: Path, run: dict) -> dict:
         if c["sha256"] == best.get("sha256"):
             return c
     raise SelectionError(f"{path}: its best checkpoint is not in run.json (stale selection); select again")
+
+
+def selection_summary(run_dir: Path, sha256: str) -> dict | None:
+    """How one checkpoint did on the run's held-out episodes, for the shipped-weights manifest
+    (None if the run was never selected on or that checkpoint was not scored)."""
+    path = Path(run_dir) / SELECTION_FILE
+    if not path.exists():
+        return None
+    table = json.loads(path.read_text())
+    scores = table["checkpoints"]
+    if sha256 not in scores or not scores[sha256]["episodes"]:
+        return None
+    goal_m = table["goal_distance_m"]
+    ranked = sorted((s for s in scores if scores[s]["episodes"]),
+                    key=lambda s: (checkpoint_score(scores[s], goal_m), -scores[s]["env_steps"]), reverse=True)
+    lower, progress_m, n = checkpoint_score(scores[sha256], goal_m)
+    return {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"], "episodes": n,
+            "successes": sum(e["success"] for e in scores[sha256]["episodes"]),
+            "success_rate_lower_95": round(lower, 3), "mean_progress_m": round(progress_m, 3),
+            "rank": ranked.index(sha256) + 1, "checkpoints_scored": len(ranked),
+            "best_env_steps": scores[ranked[0]]["env_steps"]}

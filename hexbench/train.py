@@ -455,23 +455,15 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
         raise TrainError(f"{run_dir}: no run.json (not a training run directory)")
     if not run.get("checkpoints"):
         raise TrainError(f"{run_dir}: run has no checkpoints yet")
-    selection = None
     if which == "best":
         chosen = best_checkpoint(run)
     elif which == "heldout":
-        from hexbench.selection import SELECTION_FILE, SelectionError, checkpoint_score, heldout_best
+        from hexbench.selection import SelectionError, heldout_best
 
         try:
             chosen = heldout_best(run_dir, run)
         except SelectionError as e:
             raise TrainError(str(e)) from None
-        table = json.loads((run_dir / SELECTION_FILE).read_text())
-        entry = table["checkpoints"][chosen["sha256"]]
-        lower, progress_m, n = checkpoint_score(entry, table["goal_distance_m"])
-        selection = {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"], "episodes": n,
-                     "successes": sum(e["success"] for e in entry["episodes"]),
-                     "success_rate_lower_95": round(lower, 3), "mean_progress_m": round(progress_m, 3),
-                     "checkpoints_scored": len(table["checkpoints"])}
     elif which == "last":
         chosen = run["checkpoints"][-1]
     else:
@@ -507,7 +499,10 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
                                                              "curriculum_level_mean", "curriculum_level_max")},
         "published_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
-    if selection is not None:
+    from hexbench.selection import selection_summary
+
+    selection = selection_summary(run_dir, chosen["sha256"])
+    if selection is not None:  # how the shipped checkpoint did on held-out episodes, whoever chose it
         manifest["checkpoints"][key]["selection"] = selection
     write_json_atomic(manifest_path, manifest)
     return manifest["checkpoints"][key]

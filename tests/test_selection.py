@@ -49,6 +49,7 @@ def test_select_scores_new_checkpoints_then_publish_ships_the_best(tmp_path):
     entry = json.loads((dest / "manifest.json").read_text())["checkpoints"]["ppo_cpg-stairs"]
     assert entry["source_checkpoint_sha256"] == table["best"]["sha256"]
     assert entry["selection"]["levels"] == [2.0] and entry["selection"]["checkpoints_scored"] == 2
+    assert entry["selection"]["rank"] == 1
     assert entry["selection"]["episodes"] == len(table["checkpoints"][table["best"]["sha256"]]["episodes"])
 
 
