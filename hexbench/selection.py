@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import json
 import math
+import time
 from dataclasses import dataclass, replace
 from multiprocessing import get_context
 from pathlib import Path
@@ -29,6 +30,7 @@ import numpy as np
 
 HELDOUT_NAMESPACE = "heldout"
 SELECTION_FILE = "selection.json"
+SAVE_EVERY_S = 60.0  # selection.json is rewritten at least this often during a long selection
 # Two levels per terrain where the open-loop CPG's success falls off (leaderboard/cpg.json): rough
 # and stairs in the upper half of paper Table 4; on slopes the CPG passes every Table 4 level, so
 # its top level and the 18 deg headroom level (CPG 85%). Easy levels add no information.
@@ -125,7 +127,7 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     RUN_DIR/selection.json are kept (a change of levels starts afresh). Returns the table it writes.
     """
     from hexbench.tasks import load_suite
-    from hexbench.train import read_run, write_json_atomic
+    from hexbench.train import read_run
 
     run_dir = Path(run_dir)
     run = read_run(run_dir)
@@ -176,21 +178,33 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
             pool = get_context("spawn").Pool(workers)
             outcomes = pool.imap_unordered(_score_job, jobs)
         try:
+            last_save = time.monotonic()
             for sha, level, seed, outcome in outcomes:
                 if "error" in outcome:
                     raise SelectionError(outcome["error"])
                 scores[sha]["episodes"].append({"level": level, "seed": seed, **outcome})
                 bar.advance(task)
+                if time.monotonic() - last_save > SAVE_EVERY_S:  # an interrupted selection keeps its episodes
+                    _save(path, table, run)
+                    last_save = time.monotonic()
         finally:
             if pool is not None:
                 pool.terminate()
+    _save(path, table, run)
+    return table
+
+
+def _save(path: Path, table: dict, run: dict) -> None:
+    from hexbench.train import write_json_atomic
+
+    scores = table["checkpoints"]
     for entry in scores.values():
         entry["episodes"].sort(key=lambda e: (e["level"], e["seed"]))
     scored = [c for c in run["checkpoints"] if scores.get(c["sha256"], {}).get("episodes")]
-    best = max(scored, key=lambda c: (checkpoint_score(scores[c["sha256"]], goal_m), -c["env_steps"]))
-    table["best"] = {"file": best["file"], "env_steps": best["env_steps"], "sha256": best["sha256"]}
+    if scored:
+        best = max(scored, key=lambda c: (checkpoint_score(scores[c["sha256"]], table["goal_distance_m"]), -c["env_steps"]))
+        table["best"] = {"file": best["file"], "env_steps": best["env_steps"], "sha256": best["sha256"]}
     write_json_atomic(path, table)
-    return table
 
 
 def heldout_best(run_dir: Path, run: dict) -> dict:
