@@ -120,6 +120,12 @@ def checkpoint_score(entry: dict, goal_distance_m: float) -> tuple[float, float,
     return wilson_interval(wins, len(episodes))[0], float(np.mean(progress)), len(episodes)
 
 
+def rank_key(table: dict, sha256: str) -> tuple:
+    """Sort key of a scored checkpoint in a selection table: its score, then fewer env steps."""
+    entry = table["checkpoints"][sha256]
+    return checkpoint_score(entry, table["goal_distance_m"]), -entry["env_steps"]
+
+
 def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None = None, stride: int = 1,
            max_env_steps: int | None = None, top: int | None = None, workers: int = 1,
            progress: bool = True) -> dict:
@@ -152,7 +158,7 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     table = json.loads(path.read_text()) if path.exists() else {}
     if table.get("levels") != list(levels):
         table = {"namespace": HELDOUT_NAMESPACE, "levels": list(levels), "checkpoints": {}}
-    table["goal_distance_m"] = goal_m = load_suite().task(terrain, levels[0]).goal_distance_m
+    table["goal_distance_m"] = load_suite().task(terrain, levels[0]).goal_distance_m
     scores = table["checkpoints"]
 
     if max_env_steps is not None:
@@ -162,7 +168,7 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         chosen.append(ckpts[-1])
     if top is not None:
         ranked = sorted((c for c in chosen if c["sha256"] in scores),
-                        key=lambda c: (checkpoint_score(scores[c["sha256"]], goal_m), -c["env_steps"]), reverse=True)
+                        key=lambda c: rank_key(table, c["sha256"]), reverse=True)
         chosen = ranked[:top]
     jobs = []
     for c in chosen:
@@ -205,7 +211,7 @@ def _save(path: Path, table: dict, run: dict) -> None:
         entry["episodes"].sort(key=lambda e: (e["level"], e["seed"]))
     scored = [c for c in run["checkpoints"] if scores.get(c["sha256"], {}).get("episodes")]
     if scored:
-        best = max(scored, key=lambda c: (checkpoint_score(scores[c["sha256"]], table["goal_distance_m"]), -c["env_steps"]))
+        best = max(scored, key=lambda c: rank_key(table, c["sha256"]))
         table["best"] = {"file": best["file"], "env_steps": best["env_steps"], "sha256": best["sha256"]}
     write_json_atomic(path, table)
 
@@ -232,10 +238,9 @@ def selection_summary(run_dir: Path, sha256: str) -> dict | None:
     scores = table["checkpoints"]
     if sha256 not in scores or not scores[sha256]["episodes"]:
         return None
-    goal_m = table["goal_distance_m"]
     ranked = sorted((s for s in scores if scores[s]["episodes"]),
-                    key=lambda s: (checkpoint_score(scores[s], goal_m), -scores[s]["env_steps"]), reverse=True)
-    lower, progress_m, n = checkpoint_score(scores[sha256], goal_m)
+                    key=lambda s: rank_key(table, s), reverse=True)
+    lower, progress_m, n = checkpoint_score(scores[sha256], table["goal_distance_m"])
     return {"by": "held-out episodes (hexbench.selection)", "levels": table["levels"], "episodes": n,
             "successes": sum(e["success"] for e in scores[sha256]["episodes"]),
             "success_rate_lower_95": round(lower, 3), "mean_progress_m": round(progress_m, 3),
