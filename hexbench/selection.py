@@ -147,10 +147,10 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         raise SelectionError(f"{run_dir}: run has no checkpoints yet")
     terrain = run["terrain"]
     levels = tuple(levels) if levels else SELECTION_LEVELS[terrain]
-    valid = load_suite().levels(terrain)
-    bad = [lv for lv in levels if lv not in valid]
-    if bad:
-        raise SelectionError(f"level {bad[0]:g} is not a {terrain} level; valid levels: {', '.join(f'{v:g}' for v in valid)}")
+    try:  # selection levels are protocol levels; the suite names the valid ones
+        tasks = [load_suite().task(terrain, lv) for lv in levels]
+    except ValueError as e:
+        raise SelectionError(str(e)) from None
     if episodes < 1 or stride < 1 or workers < 1 or (top is not None and top < 1):
         raise SelectionError("--episodes, --stride, --top and --workers must be >= 1")
 
@@ -158,7 +158,7 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     table = json.loads(path.read_text()) if path.exists() else {}
     if table.get("levels") != list(levels):
         table = {"namespace": HELDOUT_NAMESPACE, "levels": list(levels), "checkpoints": {}}
-    table["goal_distance_m"] = load_suite().task(terrain, levels[0]).goal_distance_m
+    table["goal_distance_m"] = tasks[0].goal_distance_m
     scores = table["checkpoints"]
 
     if max_env_steps is not None:

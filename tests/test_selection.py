@@ -58,7 +58,7 @@ def test_select_bad_level_and_publish_without_selection_give_one_line(tmp_path):
     assert train_tiny("ppo_cpg", out, steps=64, terrain="stairs").exit_code == 0
     result = run_cli("checkpoints", "select", out, "--level", "2.2")
     assert result.exit_code == 2
-    assert "level 2.2 is not a stairs level; valid levels: 2, 3, 4" in result.output
+    assert "unknown stairs level 2.2; valid levels: 2, 3, 4" in result.output
     assert not (out / "selection.json").exists()
     result = run_cli("checkpoints", "publish", out, "--checkpoint", "heldout", "--dest", tmp_path / "dest")
     assert result.exit_code == 2 and "run `hexbench checkpoints select" in result.output
