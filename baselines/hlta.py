@@ -108,12 +108,10 @@ def make_controller(task, config: Config = CONFIG) -> HLTAController:
     """The HLTA controller with the shipped classifier and the shipped PPO-CPG policy of every terrain."""
     from hexbench.controller import load_controller_module
     from hexbench.env import DEFAULT_RESIDUAL_SCALE
-    from hexbench.policy import TRAINING_GOAL_DISTANCE_M, make_policy_controller
+    from hexbench.policy import make_policy_controller
 
     low = load_controller_module(HERE / config.low_level_baseline)
-    # on a course longer than training's 2.5 m, each policy sees a waypoint at most 2.5 m ahead (hexbench.policy)
-    horizon = TRAINING_GOAL_DISTANCE_M if task.goal_distance_m > TRAINING_GOAL_DISTANCE_M else None
-    policies = {t: make_policy_controller(low.CONFIG, low.CHECKPOINTS_DIR, "ppo_cpg", t, horizon)
+    policies = {t: make_policy_controller(low.CONFIG, low.CHECKPOINTS_DIR, "ppo_cpg", task, weights_terrain=t)
                 for t in config.terrains}
     env_eps = DEFAULT_RESIDUAL_SCALE.get(task.terrain, max(DEFAULT_RESIDUAL_SCALE.values()))
     ctrl = HLTAController(policies, make_classify(HERE / config.classifier_checkpoint), env_eps, config)

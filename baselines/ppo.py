@@ -30,6 +30,7 @@ class Config:
     ent_coef: float = 0.0
     log_std_init: float = -1.0  # not in the paper; same exploration noise as PPO-CPG
     early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
+    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.train)
 
 
 CONFIG = Config()
@@ -41,4 +42,4 @@ def make_controller(task):
     from hexbench.policy import make_policy_controller
 
     torch.set_num_threads(1)
-    return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "ppo", task.terrain)
+    return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "ppo", task)

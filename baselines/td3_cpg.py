@@ -44,4 +44,4 @@ def make_controller(task):
     from hexbench.policy import make_policy_controller
 
     torch.set_num_threads(1)
-    return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "td3_cpg", task.terrain)
+    return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "td3_cpg", task)

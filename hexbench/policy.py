@@ -38,7 +38,8 @@ ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
-                                           "log_std_init", "action_noise_std", "early_end_penalty"})
+                                           "log_std_init", "action_noise_std", "early_end_penalty",
+                                           "normalize_reward"})
 MANIFEST_NAME = "manifest.json"
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
@@ -250,20 +251,27 @@ TRAINING_GOAL_DISTANCE_M = 2.5
 BASE_X_INDEX, TARGET_X_INDEX = 54, 60  # observation layout, hexbench/env.py
 
 
-def make_policy_controller(config, checkpoints_dir: Path, method: str, terrain: str,
-                           target_horizon_m: float | None = None) -> PolicyController:
-    """What a baseline file's make_controller(task) returns: its shipped weights for the terrain.
+def waypoint_horizon_m(goal_distance_m: float) -> float | None:
+    """How far ahead of the base a policy sees its target on a course of this goal distance [m].
 
-    For a course without weights of its own (POLICY_TERRAIN) the target horizon defaults to the
-    training goal distance.
+    None (the goal itself) unless the course is longer than training's; the one rule for every
+    policy controller, the HLTA's terrain policies included.
+    """
+    return TRAINING_GOAL_DISTANCE_M if goal_distance_m > TRAINING_GOAL_DISTANCE_M else None
+
+
+def make_policy_controller(config, checkpoints_dir: Path, method: str, task,
+                           weights_terrain: str | None = None) -> PolicyController:
+    """What a baseline file's make_controller(task) returns: its shipped weights for the task.
+
+    The weights are those of `weights_terrain` if given, else of the task's terrain (POLICY_TERRAIN
+    for a course without weights of its own); the target horizon follows the task's goal distance.
     """
     import torch
 
     torch.set_num_threads(1)
     validate_config(config, method)
-    if terrain in POLICY_TERRAIN and target_horizon_m is None:
-        target_horizon_m = TRAINING_GOAL_DISTANCE_M
-    terrain = POLICY_TERRAIN.get(terrain, terrain)
+    terrain = weights_terrain or POLICY_TERRAIN.get(task.terrain, task.terrain)
     path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
     policy = load_policy(config, path, entry["sha256"])
-    return PolicyController(config.action_mode, policy, entry["sha256"], path, target_horizon_m)
+    return PolicyController(config.action_mode, policy, entry["sha256"], path, waypoint_horizon_m(task.goal_distance_m))

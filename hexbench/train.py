@@ -20,6 +20,16 @@ Running the same command again resumes from the last checkpoint (sha256 checked 
 first), with the curriculum level of every env restored; --steps is the total budget, not the
 remainder. Off-policy methods (SAC, TD3) resume with an empty replay buffer: buffers are large and
 pickled, so they are not saved. SIGINT / SIGTERM save a checkpoint before exiting.
+
+A config with `normalize_reward = True` trains on rewards divided by a running estimate of the
+discounted return's standard deviation (SB3's VecNormalize, rewards only; observations keep the
+fixed OBS_SCALE, so a checkpoint is still the network alone). Why: the Table 1 returns are in the
+hundreds to thousands, and SB3 clips the *joint* gradient norm of policy and value loss at
+`max_grad_norm` (0.5). Measured on the rough PPO-CPG run (checkpoint 180,502, one minibatch): the
+value-loss gradient norm was 2,556 against the policy loss's 5.7, so clipping scaled the policy
+gradient by 0.0002 and the policy barely learned (its std stayed at 0.37 over 830k steps). The
+normaliser's statistics are stored with every checkpoint in run.json (plain numbers, no pickle)
+and restored on resume. Episode rewards in progress.csv stay the raw Table 1 returns.
 """
 
 from __future__ import annotations
@@ -157,14 +167,36 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
 
 
 def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
-                 fixed_level: float | None = None, early_end_penalty: bool = False):
-    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv
+                 fixed_level: float | None = None, early_end_penalty: bool = False,
+                 normalize_reward_gamma: float | None = None):
+    """The workers' envs as one VecEnv; with normalize_reward_gamma, rewards are normalised (VecNormalize)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty)
                  for _ in range(workers)]
-    if workers == 1:
-        return DummyVecEnv(factories)
-    return SubprocVecEnv(factories, start_method="fork")
+    venv = DummyVecEnv(factories) if workers == 1 else SubprocVecEnv(factories, start_method="fork")
+    if normalize_reward_gamma is None:
+        return venv
+    return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=normalize_reward_gamma)
+
+
+def reward_normalizer_state(venv) -> dict | None:
+    """The running return statistics of a reward-normalising VecEnv (None for a plain one)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if not isinstance(venv, VecNormalize):
+        return None
+    rms = venv.ret_rms
+    return {"mean": float(np.asarray(rms.mean)), "var": float(np.asarray(rms.var)), "count": float(rms.count)}
+
+
+def restore_reward_normalizer(venv, state: dict | None) -> None:
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if isinstance(venv, VecNormalize) and state:
+        venv.ret_rms.mean = np.float64(state["mean"])
+        venv.ret_rms.var = np.float64(state["var"])
+        venv.ret_rms.count = float(state["count"])
 
 
 # --------------------------------------------------------------------------- run directory
@@ -242,7 +274,9 @@ def make_callback(settings: TrainSettings, run: dict, model_saver, progress=None
             self.last_csv = self.last_ckpt = self.t0
 
         def _on_step(self) -> bool:
-            rewards = self.locals["rewards"]
+            # raw Table 1 rewards, also when the learner sees normalised ones
+            env = self.training_env
+            rewards = env.get_original_reward() if hasattr(env, "get_original_reward") else self.locals["rewards"]
             self.reward_sum += float(np.sum(rewards))
             self.reward_steps += len(rewards)
             for i, info in enumerate(self.locals["infos"]):
@@ -337,11 +371,17 @@ def train(settings: TrainSettings) -> dict:
     previous = read_run(run_dir)
     cfg_dict = config_dict(config)
     if previous is not None:
-        for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
-                         ("workers", settings.workers), ("config", cfg_dict),
-                         ("fixed_level", settings.fixed_level)):
-            if previous.get(key) != now:
-                raise TrainError(f"{run_dir}: holds a run with {key}={previous.get(key)!r}, not {now!r}; "
+        # a config field added after the run started is absent from its run.json: it resumes only with
+        # that field off (False / None), which is how the run was trained
+        recorded = {**{k: v for k, v in cfg_dict.items() if not v}, **previous.get("config", {})}
+        for key, was, now in (("method", previous.get("method"), settings.method),
+                              ("terrain", previous.get("terrain"), settings.terrain),
+                              ("seed", previous.get("seed"), settings.seed),
+                              ("workers", previous.get("workers"), settings.workers),
+                              ("config", recorded, cfg_dict),
+                              ("fixed_level", previous.get("fixed_level"), settings.fixed_level)):
+            if was != now:
+                raise TrainError(f"{run_dir}: holds a run with {key}={was!r}, not {now!r}; "
                                  f"choose another --out or move it away")
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "checkpoints").mkdir(exist_ok=True)
@@ -360,7 +400,8 @@ def train(settings: TrainSettings) -> dict:
     write_json_atomic(run_dir / "run.json", run)
 
     venv = make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale,
-                        settings.fixed_level, getattr(config, "early_end_penalty", False))
+                        settings.fixed_level, getattr(config, "early_end_penalty", False),
+                        config.gamma if getattr(config, "normalize_reward", False) else None)
     cls = algo_class(config.algo)
     if run["checkpoints"]:
         last = run["checkpoints"][-1]
@@ -374,6 +415,7 @@ def train(settings: TrainSettings) -> dict:
             raise TrainError(str(e)) from None
         extra = {"action_noise": action_noise(config)} if action_noise(config) is not None else {}
         model = cls.load(path, env=venv, device="cpu", **extra)
+        restore_reward_normalizer(venv, last.get("reward_normalizer"))
         if run["curriculum"]:
             for i, cur in enumerate(run["curriculum"]):
                 venv.env_method("set_curriculum_state", cur["level"], cur["successes"], indices=[i])
@@ -392,6 +434,9 @@ def train(settings: TrainSettings) -> dict:
         entry = {"file": name, "sha256": sha256_file(path), "env_steps": int(env_steps),
                  "wall_time_s": round(wall_time_s, 1), "saved_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
                  **{k: _nan_to_none(v) if isinstance(v, float) else v for k, v in summary.items()}}
+        normalizer = reward_normalizer_state(venv)
+        if normalizer is not None:
+            entry["reward_normalizer"] = normalizer
         run["checkpoints"] = [c for c in run["checkpoints"] if c["file"] != name] + [entry]
         run["env_steps"] = int(env_steps)
         run["wall_time_s"] = round(wall_time_s, 1)

@@ -2,7 +2,8 @@
 
 import numpy as np
 
-from hexbench.policy import BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController
+from hexbench.policy import BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController, waypoint_horizon_m
+from hexbench.tasks import load_suite
 
 
 class RecordingPolicy:
@@ -32,3 +33,10 @@ def test_without_a_horizon_the_observation_passes_unchanged():
     obs = np.arange(62, dtype=np.float32)
     PolicyController("cpg_residual", policy).act(obs)
     np.testing.assert_array_equal(policy.seen[-1], (obs * OBS_SCALE).astype(np.float32))
+
+
+def test_waypoint_only_on_courses_longer_than_training():
+    suite = load_suite()
+    assert waypoint_horizon_m(suite.task("rough", 3.0).goal_distance_m) is None  # the 2.5 m goal itself
+    mixed = [t for t in suite.extra_tasks if t.terrain == "mixed"][0]
+    assert mixed.goal_distance_m > 2.5 and waypoint_horizon_m(mixed.goal_distance_m) == 2.5

@@ -22,6 +22,12 @@ TINY_OFF_POLICY = ["--set", "learning_starts=32", "--set", "batch_size=32", "--s
 OFF_POLICY = ("sac", "td3", "sac_cpg", "td3_cpg")
 
 
+def task(terrain: str, level: float):
+    from hexbench.tasks import load_suite
+
+    return load_suite().task(terrain, level)
+
+
 def run_cli(*args: str):
     return CliRunner().invoke(app, [str(a) for a in args], catch_exceptions=False)
 
@@ -63,6 +69,37 @@ def test_ppo_cpg_smoke_run_writes_checkpoint_csv_and_resumes(tmp_path):
     run = check_run_dir(out, 128)
     assert len(run["sessions"]) == 2 and run["sessions"][1]["from_env_steps"] == 64
     assert [c["env_steps"] for c in run["checkpoints"]] == [64, 128]
+
+
+def test_reward_normaliser_statistics_are_checkpointed_and_restored(tmp_path):
+    from hexbench.train import make_vec_env, restore_reward_normalizer
+
+    out = tmp_path / "run"
+    assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
+    stats = json.loads((out / "run.json").read_text())["checkpoints"][-1]["reward_normalizer"]
+    assert stats["count"] > 64 and stats["var"] > 0  # it saw the run's returns (count starts at 1e-4)
+    assert train_tiny("ppo_cpg", out, steps=128).exit_code == 0
+    resumed = json.loads((out / "run.json").read_text())["checkpoints"][-1]["reward_normalizer"]
+    assert resumed["count"] == pytest.approx(stats["count"] + 64)  # carried on from the saved statistics
+    venv = make_vec_env("rough", "cpg_residual", 1, normalize_reward_gamma=0.99)
+    try:
+        restore_reward_normalizer(venv, stats)
+        assert (float(venv.ret_rms.var), venv.ret_rms.count) == (stats["var"], stats["count"])
+    finally:
+        venv.close()
+
+
+def test_run_from_before_a_new_config_field_resumes_only_with_that_field_off(tmp_path):
+    out = tmp_path / "run"
+    assert train_tiny("ppo_cpg", out, steps=64, extra=("--set", "normalize_reward=False")).exit_code == 0
+    run = json.loads((out / "run.json").read_text())
+    del run["config"]["normalize_reward"]  # as recorded by a run started before the field existed
+    (out / "run.json").write_text(json.dumps(run))
+    result = train_tiny("ppo_cpg", out, steps=128)  # the file's default turns it on: not that run
+    assert result.exit_code == 2 and "holds a run with config=" in result.output
+    result = train_tiny("ppo_cpg", out, steps=128, extra=("--set", "normalize_reward=False"))
+    assert result.exit_code == 0, result.output
+    assert json.loads((out / "run.json").read_text())["env_steps"] >= 128
 
 
 def test_resume_refuses_tampered_training_checkpoint(tmp_path):
@@ -113,7 +150,7 @@ def test_publish_then_controller_acts_like_the_trained_policy(tmp_path):
     assert entry["complete"] and entry["env_steps"] == 64
 
     task = load_suite().task("rough", 5)
-    ctrl = make_policy_controller(load_baseline("ppo_cpg").CONFIG, dest, "ppo_cpg", "rough")
+    ctrl = make_policy_controller(load_baseline("ppo_cpg").CONFIG, dest, "ppo_cpg", task)
     assert ctrl.action_mode == "cpg_residual"
     env = HexapodEnv(task.env_config("cpg_residual"))
     obs, _ = env.reset(seed=3)
@@ -134,18 +171,18 @@ def test_corrupt_missing_or_unlisted_shipped_checkpoint_is_refused(tmp_path):
     assert run_cli("checkpoints", "publish", out, "--dest", dest).exit_code == 0
     config = load_baseline("ppo_cpg").CONFIG
     with pytest.raises(CheckpointError, match="no checkpoint 'ppo_cpg-stairs'"):
-        make_policy_controller(config, dest, "ppo_cpg", "stairs")
+        make_policy_controller(config, dest, "ppo_cpg", task("stairs", 2.0))
     zip_path = dest / "ppo_cpg-rough.zip"
     data = bytearray(zip_path.read_bytes())
     data[len(data) // 2] ^= 0xFF
     zip_path.write_bytes(bytes(data))
     with pytest.raises(CheckpointError, match="corrupt or tampered"):
-        make_policy_controller(config, dest, "ppo_cpg", "rough")
+        make_policy_controller(config, dest, "ppo_cpg", task("rough", 3.0))
     result = run_cli("checkpoints", "verify", "--dir", dest)
     assert result.exit_code == 1 and "does not match the manifest" in result.output
     zip_path.unlink()
     with pytest.raises(CheckpointError, match="checkpoint file missing"):
-        make_policy_controller(config, dest, "ppo_cpg", "rough")
+        make_policy_controller(config, dest, "ppo_cpg", task("rough", 3.0))
 
 
 def test_epsilon_sweep_and_learning_curves(tmp_path):
