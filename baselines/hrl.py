@@ -28,7 +28,7 @@ class Config:
     n_steps: int = 2048  # rollout length per env (SB3 default)
     n_epochs: int = 10  # SB3 default
     ent_coef: float = 0.0
-    log_std_init: float = -1.0  # not in the paper; same exploration noise as PPO-CPG
+    log_std_init: float = -1.0  # not in the paper: std 0.37 (SB3's 1.0 saturates most actions)
     early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
     normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.train)
 
