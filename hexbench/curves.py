@@ -5,13 +5,15 @@
 Each run directory contributes one line per panel: at every logged env-step count, the mean over
 its envs of the mean episode reward of their last 20 episodes, and the mean curriculum level. A run
 that has not reached its env-step budget is labelled "partial: N of M steps", one trained without
-the early-end penalty says so. The CSVs plotted are copied next to the PNG as <run directory name>.csv, so the figure can be regenerated from
+the early-end penalty says so; labels are run directory names, with the initial policy std and
+whether rewards were normalised. The CSVs plotted are copied next to the PNG as <run directory name>.csv, so the figure can be regenerated from
 committed data alone (`hexbench curves leaderboard/curves/*.csv`).
 """
 
 from __future__ import annotations
 
 import json
+import math
 import shutil
 from pathlib import Path
 
@@ -47,7 +49,13 @@ def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
         success_rate=("success_rate", "mean"), curriculum_level=("curriculum_level", "mean"),
         episodes=("episodes", "sum"))
     if run:
-        label = f"{run['method']} {run['terrain']} seed {run['seed']}"
+        # the run directory's name (or its CSV copy's stem): runs of one method, terrain and seed
+        # under different configs (docs/training.md: v2, v3, v4) stay apart in the legend
+        label = f"{source.stem if not source.is_dir() else source.resolve().name}"
+        cfg = run.get("config") or {}
+        if cfg.get("log_std_init") is not None:
+            label += f" (std {math.exp(cfg['log_std_init']):.2f}"
+            label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
         if not (run.get("config") or {}).get("early_end_penalty", False):
             label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
         if run.get("env_steps", 0) < run.get("total_steps", 0) or agg["env_steps"].max() < run.get("total_steps", 0):
