@@ -51,12 +51,12 @@ def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
     if run:
         # the run directory's name (or its CSV copy's stem): runs of one method, terrain and seed
         # under different configs (docs/training.md: v2, v3, v4) stay apart in the legend
-        label = f"{source.stem if not source.is_dir() else source.resolve().name}"
+        label = source.resolve().name if source.is_dir() else source.stem
         cfg = run.get("config") or {}
         if cfg.get("log_std_init") is not None:
             label += f" (std {math.exp(cfg['log_std_init']):.2f}"
             label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
-        if not (run.get("config") or {}).get("early_end_penalty", False):
+        if not cfg.get("early_end_penalty", False):
             label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
         if run.get("env_steps", 0) < run.get("total_steps", 0) or agg["env_steps"].max() < run.get("total_steps", 0):
             label += f" (partial: {int(agg['env_steps'].max()):,} of {run['total_steps']:,} steps)"

@@ -27,7 +27,7 @@ fixed OBS_SCALE, so a checkpoint is still the network alone). Why: the Table 1 r
 hundreds to thousands, and SB3 clips the *joint* gradient norm of policy and value loss at
 `max_grad_norm` (0.5). Measured on the rough PPO-CPG run (checkpoint 180,502, one minibatch): the
 value-loss gradient norm was 2,556 against the policy loss's 5.7, so clipping scaled the policy
-gradient by 0.0002 and the policy barely learned (its std stayed at 0.37 over 830k steps). The
+gradient by 0.0002 and the policy barely learned (its std went 0.368 -> 0.345 in 830k steps). The
 normaliser's statistics are stored with every checkpoint in run.json (plain numbers, no pickle)
 and restored on resume. Episode rewards in progress.csv stay the raw Table 1 returns.
 """
