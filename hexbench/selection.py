@@ -89,7 +89,9 @@ def play_episode(policy, config, terrain: str, level: float, seed: int) -> Episo
         env.close()
 
 
-def _score_job(job: tuple) -> tuple[str, float, int, dict]:
+def score_job(job: tuple) -> tuple[str, float, int, dict]:
+    """One held-out episode: job = (run.json dict, run directory, checkpoint entry, level, seed);
+    returns (checkpoint sha256, level, seed, outcome or {"error": one line})."""
     import torch
 
     from hexbench.policy import CheckpointError, load_policy
@@ -182,10 +184,10 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     with Progress(disable=not progress, transient=True) as bar:
         task = bar.add_task(f"held-out episodes ({len(chosen)} checkpoints)", total=len(jobs))
         if workers == 1:
-            outcomes, pool = map(_score_job, jobs), None
+            outcomes, pool = map(score_job, jobs), None
         else:
             pool = get_context("spawn").Pool(workers)
-            outcomes = pool.imap_unordered(_score_job, jobs)
+            outcomes = pool.imap_unordered(score_job, jobs)
         try:
             last_save = time.monotonic()
             for sha, level, seed, outcome in outcomes:

@@ -1,0 +1,72 @@
+"""Held-out head-to-head of checkpoints from different training runs (issue 5).
+
+`hexbench checkpoints select` ranks the checkpoints of one run. To choose between the best of two
+runs, this plays each named checkpoint on the same held-out seeds (hexbench.selection's `heldout`
+namespace, never a protocol seed) at the levels given, under the protocol's rules, and prints
+successes per level. Nothing is written to the runs' selection.json.
+
+    python bench/compare_checkpoints.py training/ppo_cpg-rough-seed0-v2:180502 \\
+        training/ppo_cpg-rough-seed0-v4:218704 --levels 5 7 9 11 --episodes 20 --workers 2
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import Counter, defaultdict
+from multiprocessing import get_context
+from pathlib import Path
+
+from hexbench.selection import heldout_seeds, score_job
+from hexbench.train import read_run
+
+
+def parse_candidate(text: str) -> tuple[dict, Path, dict]:
+    """'RUN_DIR:ENV_STEPS' -> (run.json, run directory, checkpoint entry)."""
+    run_dir, _, steps = text.rpartition(":")
+    run = read_run(Path(run_dir))
+    if run is None:
+        raise SystemExit(f"error: {run_dir}: no run.json (expected RUN_DIR:ENV_STEPS)")
+    entry = next((c for c in run["checkpoints"] if str(c["env_steps"]) == steps), None)
+    if entry is None:
+        valid = ", ".join(str(c["env_steps"]) for c in run["checkpoints"])
+        raise SystemExit(f"error: {run_dir} has no checkpoint at {steps} env steps; it has: {valid}")
+    return run, Path(run_dir), entry
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("candidates", nargs="+", help="RUN_DIR:ENV_STEPS")
+    ap.add_argument("--levels", nargs="+", type=float, required=True)
+    ap.add_argument("--episodes", type=int, default=20, help="held-out episodes per level")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--json", type=Path, help="also write the outcomes here")
+    args = ap.parse_args()
+    candidates = [parse_candidate(c) for c in args.candidates]
+    terrains = {run["terrain"] for run, _, _ in candidates}
+    if len(terrains) != 1:
+        raise SystemExit(f"error: candidates come from different terrains: {', '.join(sorted(terrains))}")
+    terrain = terrains.pop()
+    jobs = [(run, str(d), c, lv, seed) for run, d, c in candidates for lv in args.levels
+            for seed in heldout_seeds(terrain, lv, args.episodes)]
+    with get_context("spawn").Pool(args.workers) as pool:
+        outcomes = list(pool.imap_unordered(score_job, jobs))
+    names = {c["sha256"]: f"{d}:{c['env_steps']}" for _, d, c in candidates}
+    wins: dict[str, dict[float, int]] = defaultdict(lambda: defaultdict(int))
+    ends: dict[str, Counter] = defaultdict(Counter)
+    for sha, level, _seed, out in outcomes:
+        if "error" in out:
+            raise SystemExit(f"error: {out['error']}")
+        wins[sha][level] += out["success"]
+        ends[sha][out["end_reason"]] += 1
+    for sha, name in names.items():
+        per_level = "  ".join(f"{lv:g}: {wins[sha][lv]}/{args.episodes}" for lv in args.levels)
+        total = sum(wins[sha].values())
+        print(f"{name:50s} {per_level}   total {total}/{args.episodes * len(args.levels)}   {dict(ends[sha])}")
+    if args.json:
+        args.json.write_text(json.dumps([{"checkpoint": names[sha], "level": lv, "seed": seed, **out}
+                                         for sha, lv, seed, out in outcomes], indent=1))
+
+
+if __name__ == "__main__":
+    main()
