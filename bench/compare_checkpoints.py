@@ -18,7 +18,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from hexbench.selection import heldout_seeds, score_job
-from hexbench.train import read_run
+from hexbench.train import TrainError, checkpoint_at, read_run
 
 
 def parse_candidate(text: str) -> tuple[dict, Path, dict]:
@@ -27,11 +27,10 @@ def parse_candidate(text: str) -> tuple[dict, Path, dict]:
     run = read_run(Path(run_dir))
     if run is None:
         raise SystemExit(f"error: {run_dir}: no run.json (expected RUN_DIR:ENV_STEPS)")
-    entry = next((c for c in run["checkpoints"] if str(c["env_steps"]) == steps), None)
-    if entry is None:
-        valid = ", ".join(str(c["env_steps"]) for c in run["checkpoints"])
-        raise SystemExit(f"error: {run_dir} has no checkpoint at {steps} env steps; it has: {valid}")
-    return run, Path(run_dir), entry
+    try:
+        return run, Path(run_dir), checkpoint_at(Path(run_dir), run, steps)
+    except TrainError as e:
+        raise SystemExit(f"error: {e}") from None
 
 
 def main() -> None:

@@ -485,6 +485,15 @@ def train(settings: TrainSettings) -> dict:
 
 
 # --------------------------------------------------------------------------- publishing
+def checkpoint_at(run_dir: Path, run: dict, env_steps: str, other_choices: tuple[str, ...] = ()) -> dict:
+    """The run's checkpoint at `env_steps` (as typed); a one-line TrainError naming the valid choices if none."""
+    for c in run["checkpoints"]:
+        if str(c["env_steps"]) == env_steps:
+            return c
+    valid = ", ".join([*other_choices, *(str(c["env_steps"]) for c in run["checkpoints"])])
+    raise TrainError(f"{run_dir}: no checkpoint {env_steps!r}; valid: {valid}")
+
+
 def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> dict:
     """Copy a run's checkpoint (best, last, or a step count) as shipped policy-only weights.
 
@@ -512,11 +521,7 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
     elif which == "last":
         chosen = run["checkpoints"][-1]
     else:
-        matches = [c for c in run["checkpoints"] if str(c["env_steps"]) == which]
-        if not matches:
-            have = ", ".join(str(c["env_steps"]) for c in run["checkpoints"])
-            raise TrainError(f"{run_dir}: no checkpoint {which!r}; valid: best, heldout, last, {have}")
-        chosen = matches[0]
+        chosen = checkpoint_at(run_dir, run, which, other_choices=("best", "heldout", "last"))
     try:
         state = load_policy_weights(run_dir / chosen["file"], chosen["sha256"])
     except CheckpointError as e:
