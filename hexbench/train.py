@@ -373,13 +373,11 @@ def train(settings: TrainSettings) -> dict:
     if previous is not None:
         # a config field added after the run started is absent from its run.json: it resumes only with
         # that field off (False / None), which is how the run was trained
-        recorded = {**{k: v for k, v in cfg_dict.items() if not v}, **previous.get("config", {})}
-        for key, was, now in (("method", previous.get("method"), settings.method),
-                              ("terrain", previous.get("terrain"), settings.terrain),
-                              ("seed", previous.get("seed"), settings.seed),
-                              ("workers", previous.get("workers"), settings.workers),
-                              ("config", recorded, cfg_dict),
-                              ("fixed_level", previous.get("fixed_level"), settings.fixed_level)):
+        recorded = {**previous, "config": {**{k: v for k, v in cfg_dict.items() if not v}, **previous.get("config", {})}}
+        for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
+                         ("workers", settings.workers), ("config", cfg_dict),
+                         ("fixed_level", settings.fixed_level)):
+            was = recorded.get(key)
             if was != now:
                 raise TrainError(f"{run_dir}: holds a run with {key}={was!r}, not {now!r}; "
                                  f"choose another --out or move it away")
