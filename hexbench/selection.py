@@ -129,11 +129,12 @@ def rank_key(table: dict, sha256: str) -> tuple:
 
 
 def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None = None, stride: int = 1,
-           max_env_steps: int | None = None, top: int | None = None, workers: int = 1,
-           progress: bool = True) -> dict:
+           min_env_steps: int | None = None, max_env_steps: int | None = None, top: int | None = None,
+           workers: int = 1, progress: bool = True) -> dict:
     """Play held-out episodes for the run's checkpoints until each chosen one has `episodes` per level.
 
-    Chosen: every `stride`-th checkpoint and the last, none beyond `max_env_steps`; with `top`, only
+    Chosen: every `stride`-th checkpoint and the last of those between `min_env_steps` and
+    `max_env_steps` (a run that learns late need not score its early checkpoints); with `top`, only
     the `top` best-scored so far (to give the front-runners more episodes). Episodes already in
     RUN_DIR/selection.json are kept (a change of levels starts afresh). Returns the table it writes.
     """
@@ -163,8 +164,14 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     table["goal_distance_m"] = tasks[0].goal_distance_m
     scores = table["checkpoints"]
 
-    if max_env_steps is not None:
-        ckpts = [c for c in ckpts if c["env_steps"] <= max_env_steps] or ckpts[:1]
+    low, high = min_env_steps or 0, max_env_steps if max_env_steps is not None else math.inf
+    in_window = [c for c in ckpts if low <= c["env_steps"] <= high]
+    if not in_window:
+        window = " and ".join(part for part in (f">= {low}" if min_env_steps else "",
+                                                   f"<= {high}" if max_env_steps is not None else "") if part)
+        raise SelectionError(f"{run_dir}: no checkpoint at {window} env steps "
+                             f"(checkpoints run from {ckpts[0]['env_steps']} to {ckpts[-1]['env_steps']})")
+    ckpts = in_window
     chosen = ckpts[::stride]
     if chosen[-1] is not ckpts[-1]:
         chosen.append(ckpts[-1])

@@ -44,6 +44,11 @@ def test_select_scores_new_checkpoints_then_publish_ships_the_best(tmp_path):
     topped = next(c for c in table["checkpoints"].values() if len(c["episodes"]) == 2)
     assert sorted(e["seed"] for e in topped["episodes"]) == sorted(heldout_seeds("stairs", 2.0, 2))
 
+    # A window of env steps: only the checkpoint at 128 steps gets its third episode.
+    assert run_cli("checkpoints", "select", out, "--episodes", "3", "--level", "2", "--min-env-steps", "100").exit_code == 0
+    table = json.loads((out / "selection.json").read_text())
+    assert sorted((c["env_steps"], len(c["episodes"])) for c in table["checkpoints"].values())[1] == (128, 3)
+
     result = run_cli("checkpoints", "publish", out, "--checkpoint", "heldout", "--dest", dest)
     assert result.exit_code == 0, result.output
     entry = json.loads((dest / "manifest.json").read_text())["checkpoints"]["ppo_cpg-stairs"]
@@ -65,3 +70,5 @@ def test_select_bad_level_and_publish_without_selection_give_one_line(tmp_path):
     assert not (tmp_path / "dest").exists()
     result = run_cli("checkpoints", "select", tmp_path / "nowhere")
     assert result.exit_code == 2 and "no run.json" in result.output
+    result = run_cli("checkpoints", "select", out, "--level", "2", "--min-env-steps", "65")
+    assert result.exit_code == 2 and "no checkpoint at >= 65 env steps (checkpoints run from 64 to 64)" in result.output

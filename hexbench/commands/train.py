@@ -75,6 +75,7 @@ def register(app: typer.Typer) -> None:
         episodes: int = typer.Option(3, "--episodes", help="held-out episodes per selection level"),
         levels: list[float] = typer.Option([], "--level", help="selection level (repeatable) [default: hexbench.selection.SELECTION_LEVELS]"),
         stride: int = typer.Option(1, "--stride", help="score every N-th checkpoint (and the last)"),
+        min_env_steps: int = typer.Option(None, "--min-env-steps", help="score no checkpoint before this many env steps"),
         max_env_steps: int = typer.Option(None, "--max-env-steps", help="score no checkpoint beyond this many env steps"),
         top: int = typer.Option(None, "--top", help="only the N best-scored so far (top them up to --episodes)"),
         workers: int = typer.Option(1, "--workers", help="processes"),
@@ -88,7 +89,7 @@ def register(app: typer.Typer) -> None:
         console = Console(stderr=True)
         try:
             table = select(run_dir, episodes=episodes, levels=tuple(levels) or None, stride=stride,
-                           max_env_steps=max_env_steps, top=top, workers=workers)
+                           min_env_steps=min_env_steps, max_env_steps=max_env_steps, top=top, workers=workers)
         except SelectionError as e:
             console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None
