@@ -167,8 +167,7 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     low, high = min_env_steps or 0, max_env_steps if max_env_steps is not None else math.inf
     in_window = [c for c in ckpts if low <= c["env_steps"] <= high]
     if not in_window:
-        window = " and ".join(part for part in (f">= {low}" if min_env_steps else "",
-                                                   f"<= {high}" if max_env_steps is not None else "") if part)
+        window = " and ".join(f"{op} {n}" for op, n in ((">=", min_env_steps), ("<=", max_env_steps)) if n is not None)
         raise SelectionError(f"{run_dir}: no checkpoint at {window} env steps "
                              f"(checkpoints run from {ckpts[0]['env_steps']} to {ckpts[-1]['env_steps']})")
     ckpts = in_window
