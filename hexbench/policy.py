@@ -10,6 +10,7 @@ Every config has these fields, read here and by hexbench.train:
     residual_scale eps of eq. 6 (None: the terrain default of paper 3.2)
     log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
     action_noise_std (optional; TD3, SAC) std of Gaussian exploration noise added to actions
+    initial_action (optional; PPO) the policy's mean action before training (hexbench.train)
 
 and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
 
@@ -39,7 +40,7 @@ ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
                                            "log_std_init", "action_noise_std", "early_end_penalty",
-                                           "normalize_reward"})
+                                           "normalize_reward", "initial_action"})
 MANIFEST_NAME = "manifest.json"
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
@@ -77,6 +78,14 @@ def validate_config(config, where: str = "CONFIG") -> None:
         raise ConfigError(f"{where}: action_mode {config.action_mode!r} unknown; valid: {', '.join(ACTION_MODES)}")
     if config.activation not in ACTIVATIONS:
         raise ConfigError(f"{where}: activation {config.activation!r} unknown; valid: {', '.join(ACTIVATIONS)}")
+    initial_action = getattr(config, "initial_action", None)
+    if initial_action is not None:
+        n = action_dim(config.action_mode)
+        if config.algo != "ppo":
+            raise ConfigError(f"{where}: initial_action is supported for algo 'ppo' only, not {config.algo!r}")
+        if len(initial_action) != n or not all(-1.0 <= float(a) <= 1.0 for a in initial_action):
+            raise ConfigError(f"{where}: initial_action must be {n} numbers in [-1, 1] for action_mode "
+                              f"{config.action_mode!r}; got {tuple(initial_action)}")
 
 
 def algo_class(algo: str):

@@ -124,7 +124,10 @@ def load_baseline_config(path: Path, overrides: tuple[tuple[str, object], ...] =
             if name not in names:
                 raise TrainError(f"{path}: config has no field {name!r}; fields: {', '.join(sorted(names))}")
         config = replace(config, **dict(overrides))
-        validate_config(config, str(path))
+        try:
+            validate_config(config, str(path))
+        except ConfigError as e:
+            raise TrainError(str(e)) from None
     return config
 
 
@@ -197,6 +200,20 @@ def restore_reward_normalizer(venv, state: dict | None) -> None:
         venv.ret_rms.mean = np.float64(state["mean"])
         venv.ret_rms.var = np.float64(state["var"])
         venv.ret_rms.count = float(state["count"])
+
+
+def set_initial_action(model, initial_action) -> None:
+    """Start a new PPO policy's mean action at initial_action (its output layer's bias).
+
+    SB3 initialises the action layer with tiny weights (orthogonal, gain 0.01) and zero bias, so a
+    fresh policy's mean action is about 0 whatever the observation; the bias moves that starting
+    point. HRL uses it to start from the CPG's own gait instead of the middle of the parameter
+    ranges, where the hip does not swing and the robot does not walk (baselines/hrl.py).
+    """
+    import torch
+
+    with torch.no_grad():
+        model.policy.action_net.bias.copy_(torch.as_tensor(initial_action, dtype=torch.float32))
 
 
 # --------------------------------------------------------------------------- run directory
@@ -421,6 +438,8 @@ def train(settings: TrainSettings) -> dict:
         extra = {"action_noise": action_noise(config)} if action_noise(config) is not None else {}
         model = cls("MlpPolicy", venv, seed=settings.seed, device="cpu", verbose=0,
                     policy_kwargs=policy_kwargs(config), **sb3_kwargs(config), **extra)
+        if getattr(config, "initial_action", None) is not None:
+            set_initial_action(model, config.initial_action)
 
     def save_checkpoint(model, env_steps: int, wall_time_s: float, curriculum: list[dict], summary: dict,
                         episodes: list[int]) -> None:

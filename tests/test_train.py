@@ -3,6 +3,7 @@ trip, corrupt or tampered checkpoints refused, epsilon sweep and learning curves
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 from pathlib import Path
@@ -12,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from hexbench.cli import app
-from hexbench.policy import CheckpointError, make_policy_controller, scale_observation
+from hexbench.policy import CheckpointError, ConfigError, make_policy_controller, scale_observation, validate_config
 
 REPO = Path(__file__).resolve().parent.parent
 BASELINES = REPO / "baselines"
@@ -131,6 +132,40 @@ def test_every_baseline_trains_through_the_cli(tmp_path, method):
     run = json.loads((out / "run.json").read_text())
     assert run["config"]["action_mode"] == load_baseline(method).CONFIG.action_mode
     assert run["env_steps"] >= 96
+
+
+def test_hrl_starts_from_the_cpg_gait_and_walks(tmp_path):
+    """A just-started HRL policy (one tiny update) acts near its initial_action and walks 2.5 m."""
+    from hexbench.env import HexapodEnv
+
+    out, dest = tmp_path / "run", tmp_path / "checkpoints"
+    assert train_tiny("hrl", out, steps=64).exit_code == 0
+    assert run_cli("checkpoints", "publish", out, "--dest", dest).exit_code == 0
+    config = load_baseline("hrl").CONFIG
+    rough5 = task("rough", 5)
+    ctrl = make_policy_controller(config, dest, "hrl", rough5)
+    env = HexapodEnv(rough5.env_config("cpg_params"))
+    obs, _ = env.reset(seed=11)
+    ctrl.reset(11)
+    for _ in range(env.config.max_steps):
+        action = ctrl.act(obs)
+        np.testing.assert_allclose(action, config.initial_action, atol=0.15)
+        obs, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    env.close()
+    assert info["end_reason"] == "success"
+
+
+def test_initial_action_of_the_wrong_size_or_algo_is_one_line(tmp_path):
+    out = tmp_path / "run"
+    result = run_cli("train", BASELINES / "hrl.py", "--terrain", "rough", "--out", out, "--set", "initial_action=(0.5,)")
+    assert result.exit_code == 2 and "initial_action must be 4 numbers in [-1, 1]" in result.output
+    assert not out.exists()
+    sac_with_start = dataclasses.make_dataclass("C", [("initial_action", tuple, (0.0,) * 18)],
+                                                bases=(type(load_baseline("sac_cpg").CONFIG),), frozen=True)()
+    with pytest.raises(ConfigError, match="initial_action is supported for algo 'ppo' only, not 'sac'"):
+        validate_config(sac_with_start)
 
 
 def test_publish_then_controller_acts_like_the_trained_policy(tmp_path):
