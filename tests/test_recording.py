@@ -410,7 +410,9 @@ def test_recording_many_episodes_does_not_pile_up_writer_threads(tmp_path):
     before = threads()
     for i in range(3):
         record_short_episode(tmp_path, f"e{i}", steps=3)
-    assert threads() == before
+    # At most as many: a thread left over from an earlier test (a pool or a flush winding down)
+    # may end meanwhile, which `==` took for a failure; a leak adds one thread per episode.
+    assert threads() <= before
 
 
 def test_whole_robot_contact_query_agrees_with_per_foot_query():
