@@ -64,6 +64,9 @@ CSV_COLUMNS = ("env_steps", "wall_time_s", "env_index", "episodes", "mean_episod
                "curriculum_level", "curriculum_successes")
 
 
+TRAIN_DEVICES: tuple[str, ...] = ("cpu", "cuda")
+
+
 class TrainError(Exception):
     """Bad training input or state; the message is one line."""
 
@@ -83,6 +86,7 @@ class TrainSettings:
     command: str = ""
     show_progress: bool = True
     fixed_level: float | None = None  # train at one level without the curriculum (epsilon sweep)
+    device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
 
     @property
     def method(self) -> str:
@@ -383,6 +387,10 @@ def train(settings: TrainSettings) -> dict:
         raise TrainError(f"--workers must be >= 1 (got {settings.workers})")
     if settings.total_steps < 1:
         raise TrainError(f"--steps must be >= 1 (got {settings.total_steps})")
+    if settings.device not in TRAIN_DEVICES:
+        raise TrainError(f"unknown --device {settings.device!r}; valid: {', '.join(TRAIN_DEVICES)}")
+    if settings.device == "cuda" and not torch.cuda.is_available():
+        raise TrainError("--device cuda: this torch sees no CUDA GPU (torch.cuda.is_available() is False); use --device cpu")
     config = load_baseline_config(Path(settings.baseline_path), settings.overrides)
     run_dir = settings.run_dir
     previous = read_run(run_dir)
@@ -429,14 +437,14 @@ def train(settings: TrainSettings) -> dict:
             venv.close()
             raise TrainError(str(e)) from None
         extra = {"action_noise": action_noise(config)} if action_noise(config) is not None else {}
-        model = cls.load(path, env=venv, device="cpu", **extra)
+        model = cls.load(path, env=venv, device=settings.device, **extra)
         restore_reward_normalizer(venv, last.get("reward_normalizer"))
         if run["curriculum"]:
             for i, cur in enumerate(run["curriculum"]):
                 venv.env_method("set_curriculum_state", cur["level"], cur["successes"], indices=[i])
     else:
         extra = {"action_noise": action_noise(config)} if action_noise(config) is not None else {}
-        model = cls("MlpPolicy", venv, seed=settings.seed, device="cpu", verbose=0,
+        model = cls("MlpPolicy", venv, seed=settings.seed, device=settings.device, verbose=0,
                     policy_kwargs=policy_kwargs(config), **sb3_kwargs(config), **extra)
         if getattr(config, "initial_action", None) is not None:
             set_initial_action(model, config.initial_action)

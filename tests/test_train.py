@@ -121,6 +121,8 @@ def test_bad_terrain_and_bad_override_give_one_line_and_no_files(tmp_path):
     assert "unknown terrain 'moon'; valid terrains: rough, slopes, stairs" in result.output
     result = run_cli("train", BASELINES / "ppo_cpg.py", "--terrain", "rough", "--out", out, "--set", "nope=1")
     assert result.exit_code == 2 and "config has no field 'nope'" in result.output
+    result = run_cli("train", BASELINES / "ppo_cpg.py", "--terrain", "rough", "--out", out, "--device", "tpu")
+    assert result.exit_code == 2 and "unknown --device 'tpu'; valid: cpu, cuda" in result.output
     assert not out.exists()
 
 

@@ -22,6 +22,7 @@ def register(app: typer.Typer) -> None:
         csv_every_s: float = typer.Option(60.0, "--csv-every", help="seconds between progress.csv rows"),
         override: list[str] = typer.Option([], "--set", help="override a CONFIG field, NAME=VALUE (repeatable)"),
         progress: bool = typer.Option(True, "--progress/--no-progress", help="show the progress bar"),
+        device: str = typer.Option("cpu", "--device", help="torch device of the learner: cpu or cuda (SAC/TD3 gain most)"),
     ) -> None:
         """Train a baseline (PPO/SAC/TD3 per its CONFIG) on the paper's curriculum; resumes a run."""
         from rich.console import Console
@@ -34,7 +35,7 @@ def register(app: typer.Typer) -> None:
                 baseline_path=file, terrain=terrain, total_steps=steps, seed=seed, workers=workers, out_dir=out,
                 checkpoint_every_s=checkpoint_every_s, csv_every_s=csv_every_s,
                 overrides=tuple(parse_override(o) for o in override),
-                command="hexbench " + shlex.join(sys.argv[1:]), show_progress=progress,
+                command="hexbench " + shlex.join(sys.argv[1:]), show_progress=progress, device=device,
             )
             run = train(settings)
         except TrainError as e:
