@@ -22,6 +22,11 @@ import pandas as pd
 from hexbench.train import CSV_COLUMNS
 
 
+METHOD_COLOURS: dict[str, str] = {"ppo_cpg": "C0", "ppo": "C3", "hrl": "C2", "sac_cpg": "C1", "td3_cpg": "C4",
+                                   "sac": "C5", "td3": "C6"}
+SEED_LINESTYLES: tuple[str, ...] = ("-", "--", ":", "-.")
+
+
 class CurvesError(Exception):
     """A run or CSV cannot be plotted; the message is one line."""
 
@@ -75,14 +80,20 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
     if not sources:
         raise CurvesError("no runs given; pass run directories (training/...) or progress CSVs")
     loaded = [load_progress(Path(s)) for s in sources]
-    fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(8, 7), sharex=True)
-    for agg, label, _run in loaded:
-        ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], label=label)
-        ax_l.step(agg["env_steps"], agg["curriculum_level"], where="post", label=label)
+    fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(9, 8), sharex=True)
+    runs_of_method: dict[str, int] = {}
+    for source, (agg, label, run) in zip(sources, loaded):
+        # one colour per method, one line style per run of it (seeds), so seeds read as a group
+        method = run.get("method") if run else Path(source).stem.split("-")[0]
+        k = runs_of_method[method] = runs_of_method.get(method, -1) + 1
+        style = {"color": METHOD_COLOURS.get(method, f"C{len(runs_of_method) + 5}"),
+                 "linestyle": SEED_LINESTYLES[k % len(SEED_LINESTYLES)], "label": label}
+        ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], **style)
+        ax_l.step(agg["env_steps"], agg["curriculum_level"], where="post", **style)
     ax_r.set_ylabel("mean episode reward\n(last 20 episodes per env)")
     ax_l.set_ylabel("curriculum level\n(cm or deg)")
     ax_l.set_xlabel("env steps")
-    ax_r.legend(fontsize=8)
+    ax_r.legend(fontsize=7)
     ax_r.grid(alpha=0.3)
     ax_l.grid(alpha=0.3)
     fig.suptitle(title or "hexbench learning curves")
