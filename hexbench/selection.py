@@ -178,6 +178,12 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         ranked = sorted((c for c in chosen if c["sha256"] in scores),
                         key=lambda c: rank_key(table, c["sha256"]), reverse=True)
         chosen = ranked[:top]
+    absent = [c for c in chosen if not (run_dir / c["file"]).is_file()]
+    if absent:  # pruned, or trained on another machine and only the last checkpoints copied here
+        present = [c["env_steps"] for c in ckpts if (run_dir / c["file"]).is_file()]
+        where = f"files exist for {present[0]} to {present[-1]} env steps" if present else "no checkpoint file exists"
+        raise SelectionError(f"{run_dir}: {len(absent)} chosen checkpoint(s) have no file (first: {absent[0]['file']}); "
+                             f"{where}: choose them with --min-env-steps / --max-env-steps")
     jobs = []
     for c in chosen:
         have = {(e["level"], e["seed"]) for e in scores.get(c["sha256"], {}).get("episodes", [])}

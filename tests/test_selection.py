@@ -73,3 +73,11 @@ def test_select_bad_level_and_publish_without_selection_give_one_line(tmp_path):
     assert result.exit_code == 2 and "no run.json" in result.output
     result = run_cli("checkpoints", "select", out, "--level", "2", "--min-env-steps", "65")
     assert result.exit_code == 2 and "no checkpoint at >= 65 env steps (checkpoints run from 64 to 64)" in result.output
+    # a run copied from another machine with only its last checkpoint: the error says which ones exist
+    assert train_tiny("ppo_cpg", out, steps=128, terrain="stairs").exit_code == 0
+    (out / "checkpoints" / "step_0000000064.zip").unlink()
+    result = run_cli("checkpoints", "select", out, "--level", "2")
+    assert result.exit_code == 2
+    assert "1 chosen checkpoint(s) have no file (first: checkpoints/step_0000000064.zip); " \
+           "files exist for 128 to 128 env steps" in result.output
+    assert not (out / "selection.json").exists()
