@@ -46,6 +46,8 @@ def cpg_params_action(omega_swing: float, a1: float, a2: float, a3: float) -> tu
     """The cpg_params action in [-1, 1]^4 for a gait (omega_swing [rad/s], A1, A2, A3), each clipped to its range."""
     params = np.clip(np.array([omega_swing, a1, a2, a3], dtype=np.float64), CPG_PARAM_LOW, CPG_PARAM_HIGH)
     return tuple(float(a) for a in (params - CPG_PARAM_LOW) / (CPG_PARAM_HIGH - CPG_PARAM_LOW) * 2.0 - 1.0)
+
+
 OBS_DIM = 62
 # Observation bounds (generous physical limits; observations are clipped to them).
 OBS_HIGH = np.concatenate([
