@@ -151,8 +151,14 @@ def test_killed_run_leaves_no_worker_processes(tmp_path, sig):
                             cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 120
     workers = []
+    def is_spawn_worker(child) -> bool:  # short-lived helpers may exit (zombie) between listing and reading
+        try:
+            return "spawn_main" in " ".join(child.cmdline())
+        except (psutil.NoSuchProcess, psutil.AccessDenied):  # ZombieProcess is a NoSuchProcess
+            return False
+
     while time.time() < deadline and len(workers) < 2:  # both spawn workers up (multiprocessing's tracker aside)
-        workers = [c for c in psutil.Process(proc.pid).children() if "spawn_main" in " ".join(c.cmdline())]
+        workers = [c for c in psutil.Process(proc.pid).children() if is_spawn_worker(c)]
         time.sleep(0.2)
     assert len(workers) == 2
     time.sleep(1.0)  # inside their first episodes
