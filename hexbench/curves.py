@@ -31,8 +31,12 @@ class CurvesError(Exception):
     """A run or CSV cannot be plotted; the message is one line."""
 
 
-def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
-    """(per-step aggregate over envs, label, run.json or None) for a run directory or a progress CSV."""
+def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.DataFrame, str, dict | None]:
+    """(per-step aggregate over envs, label, run.json or None) for a run directory or a progress CSV.
+
+    max_env_steps: keep only the rows up to that many env steps (a common budget for all runs); a
+    run is then "partial" only if it stopped short of both its own budget and that window.
+    """
     source = Path(source)
     run = None
     if source.is_dir():
@@ -53,6 +57,9 @@ def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
         wall_time_s=("wall_time_s", "max"), mean_episode_reward=("mean_episode_reward", "mean"),
         success_rate=("success_rate", "mean"), curriculum_level=("curriculum_level", "mean"),
         episodes=("episodes", "sum"))
+    last_logged = int(agg["env_steps"].max()) if len(agg) else 0
+    if max_env_steps is not None:
+        agg = agg[agg["env_steps"] <= max_env_steps].reset_index(drop=True)
     if run:
         # the run directory's name (or its CSV copy's stem): runs of one method, terrain and seed
         # under different configs (docs/training.md: v2, v3, v4) stay apart in the legend
@@ -63,15 +70,25 @@ def load_progress(source: Path) -> tuple[pd.DataFrame, str, dict | None]:
             label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
         if not cfg.get("early_end_penalty", False):
             label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
-        if run.get("env_steps", 0) < run.get("total_steps", 0) or agg["env_steps"].max() < run.get("total_steps", 0):
-            label += f" (partial: {int(agg['env_steps'].max()):,} of {run['total_steps']:,} steps)"
+        total = run.get("total_steps", 0)
+        last = max(run.get("env_steps", 0), last_logged)
+        if max_env_steps is None and (run.get("env_steps", 0) < total or last_logged < total):
+            label += f" (partial: {last_logged:,} of {total:,} steps)"
+        elif max_env_steps is not None and last < total and last < max_env_steps:
+            label += f" (partial: {last:,} of {total:,} steps)"
+        elif max_env_steps is not None and total < max_env_steps:
+            label += f" (budget {total:,} steps)"
     else:
         label = csv_path.stem
     return agg, label, run
 
 
-def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: bool = True) -> list[Path]:
-    """Write the two-panel PNG (and copies of the CSVs next to it); returns the files written."""
+def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: bool = True,
+                max_env_steps: int | None = None) -> list[Path]:
+    """Write the two-panel PNG (and copies of the CSVs next to it); returns the files written.
+
+    max_env_steps: plot every run's first that many env steps only (methods at one budget).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -79,7 +96,9 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
 
     if not sources:
         raise CurvesError("no runs given; pass run directories (training/...) or progress CSVs")
-    loaded = [load_progress(Path(s)) for s in sources]
+    if max_env_steps is not None and max_env_steps <= 0:
+        raise CurvesError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
+    loaded = [load_progress(Path(s), max_env_steps) for s in sources]
     fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(9, 8), sharex=True)
     runs_of_method: dict[str, int] = {}
     for source, (agg, label, run) in zip(sources, loaded):
@@ -92,7 +111,9 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
         ax_l.step(agg["env_steps"], agg["curriculum_level"], where="post", **style)
     ax_r.set_ylabel("mean episode reward\n(last 20 episodes per env)")
     ax_l.set_ylabel("curriculum level\n(cm or deg)")
-    ax_l.set_xlabel("env steps")
+    ax_l.set_xlabel("env steps" if max_env_steps is None else f"env steps (first {max_env_steps:,} of every run)")
+    if max_env_steps is not None:
+        ax_l.set_xlim(0, max_env_steps)
     ax_r.legend(fontsize=7)
     ax_r.grid(alpha=0.3)
     ax_l.grid(alpha=0.3)

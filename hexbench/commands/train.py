@@ -141,6 +141,8 @@ def register(app: typer.Typer) -> None:
         out: Path = typer.Option(..., "--out", help="PNG to write, e.g. leaderboard/curves/rough.png"),
         title: str = typer.Option("", "--title", help="figure title"),
         copy_csv: bool = typer.Option(True, "--copy-csv/--no-copy-csv", help="copy run CSVs next to the PNG"),
+        max_env_steps: int | None = typer.Option(None, "--max-env-steps",
+                                                 help="plot every run's first N env steps only (one budget)"),
     ) -> None:
         """Plot episode reward and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
         from rich.console import Console
@@ -149,7 +151,7 @@ def register(app: typer.Typer) -> None:
 
         console = Console(stderr=True)
         try:
-            written = plot_curves(sources, out, title, copy_csv)
+            written = plot_curves(sources, out, title, copy_csv, max_env_steps)
         except (CurvesError, OSError, ValueError) as e:
             console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
             raise typer.Exit(2) from None

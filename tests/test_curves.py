@@ -1,0 +1,43 @@
+"""hexbench.curves: learning curves from progress CSVs, and plotting runs at one env-step budget."""
+
+import json
+
+import pandas as pd
+import pytest
+
+from hexbench.curves import CurvesError, load_progress, plot_curves
+from hexbench.train import CSV_COLUMNS
+
+
+def write_run(folder, method, total_steps, logged_steps):
+    """A progress CSV and run.json as `hexbench train` leaves them, one env, rows at logged_steps."""
+    folder.mkdir(parents=True)
+    rows = [{"env_steps": n, "wall_time_s": n / 100, "env_index": 0, "episodes": i, "mean_episode_reward": float(i),
+             "success_rate": 0.0, "curriculum_level": 5.0 + i, "curriculum_successes": 0}
+            for i, n in enumerate(logged_steps)]
+    pd.DataFrame(rows, columns=list(CSV_COLUMNS)).to_csv(folder / "progress.csv", index=False)
+    run = {"method": method, "terrain": "rough", "seed": 0, "total_steps": total_steps,
+           "env_steps": logged_steps[-1], "config": {"early_end_penalty": True}}
+    (folder / "run.json").write_text(json.dumps(run))
+    return folder
+
+
+def test_a_window_keeps_each_runs_first_steps_and_says_which_runs_had_a_smaller_budget(tmp_path):
+    long_run = write_run(tmp_path / "ppo-long", "ppo", 1_000_000, [20_000, 40_000, 60_000, 80_000, 1_000_000])
+    short_run = write_run(tmp_path / "sac-short", "sac", 60_000, [20_000, 40_000, 60_000])
+    stopped = write_run(tmp_path / "td3-stopped", "td3", 1_000_000, [20_000, 40_000])
+
+    agg, label, _ = load_progress(long_run, max_env_steps=60_000)
+    assert list(agg["env_steps"]) == [20_000, 40_000, 60_000] and "partial" not in label
+    _, label, _ = load_progress(short_run, max_env_steps=100_000)
+    assert "budget 60,000 steps" in label
+    _, label, _ = load_progress(stopped, max_env_steps=100_000)
+    assert "partial: 40,000 of 1,000,000 steps" in label
+    _, label, _ = load_progress(long_run)  # no window: the whole run, which reached its budget
+    assert "partial" not in label
+
+    png = tmp_path / "first60k.png"
+    plot_curves([long_run, short_run, stopped], png, max_env_steps=60_000, copy_csv=False)
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(CurvesError, match="positive"):
+        plot_curves([long_run], png, max_env_steps=0, copy_csv=False)
