@@ -16,7 +16,8 @@ and every other field is passed unchanged to the SB3 constructor (learning_rate,
 
 Checkpoints. Nothing is unpickled from a file whose sha256 was not checked first:
   * shipped weights (baselines/checkpoints/<method>-<terrain>.zip) hold only the policy's
-    state_dict; `baselines/checkpoints/manifest.json` records each file's sha256. Loading reads
+    state_dict, and of SAC's and TD3's only the actor (ACTING_PREFIXES: the critics serve learning);
+    `baselines/checkpoints/manifest.json` records each file's sha256. Loading reads
     the manifest, hashes the file, and only then opens the zip with SB3's `load_from_zip_file(...,
     load_data=False)`, which reads tensors with `torch.load(weights_only=True)` and skips the
     cloudpickled "data" entry altogether. The network is rebuilt from the baseline's config.
@@ -203,14 +204,30 @@ def save_policy_weights(policy_state: dict, path: Path) -> str:
     return sha256_file(path)
 
 
+# Parts of an SB3 policy that acting needs. PPO's value head shares nothing with acting but is small;
+# SAC's and TD3's critics (and their target copies) are three times the actor and serve learning only.
+ACTING_PREFIXES: dict[str, tuple[str, ...]] = {"ppo": ("",), "sac": ("actor.",), "td3": ("actor.",)}
+
+
+def acting_weights(algo: str, policy_state: dict) -> dict:
+    """The entries of a policy state_dict that acting needs (what ships in baselines/checkpoints/)."""
+    return {k: v for k, v in policy_state.items() if k.startswith(ACTING_PREFIXES[algo])}
+
+
 def load_policy(config, path: Path, expected_sha256: str):
+    """A policy of the config's network with the verified weights of `path` (full or acting-only)."""
     policy = build_policy(config)
     state = load_policy_weights(path, expected_sha256)
     try:
-        policy.load_state_dict(state)
+        result = policy.load_state_dict(state, strict=False)
     except RuntimeError as e:
         first = str(e).splitlines()[0]
         raise CheckpointError(f"{path}: weights do not fit the config's network ({first})") from None
+    missing = [k for k in result.missing_keys if k.startswith(ACTING_PREFIXES[config.algo])]
+    if missing or result.unexpected_keys:
+        what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
+        raise CheckpointError(f"{path}: weights do not fit the config's network ({what}; "
+                              f"{len(missing)} missing, {len(result.unexpected_keys)} unexpected)")
     policy.set_training_mode(False)
     return policy
 

@@ -526,7 +526,7 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
     in <dest_dir>/manifest.json: sha256, command, env-step budget and steps reached, seed, wall
     time, hexbench commit, metrics at that checkpoint and whether the run was complete.
     """
-    from hexbench.policy import MANIFEST_NAME, load_policy_weights, save_policy_weights
+    from hexbench.policy import MANIFEST_NAME, acting_weights, load_policy_weights, save_policy_weights
 
     run_dir, dest_dir = Path(run_dir), Path(dest_dir)
     run = read_run(run_dir)
@@ -553,7 +553,7 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
         raise TrainError(str(e)) from None
     dest_dir.mkdir(parents=True, exist_ok=True)
     key = f"{run['method']}-{run['terrain']}"
-    sha = save_policy_weights(state, dest_dir / f"{key}.zip")
+    sha = save_policy_weights(acting_weights(run["config"]["algo"], state), dest_dir / f"{key}.zip")
     manifest_path = dest_dir / MANIFEST_NAME
     manifest = json.loads(manifest_path.read_text()) if manifest_path.exists() else {
         "format": 1, "note": "shipped baseline weights: policy state_dict only (SB3 zip without pickled data); "

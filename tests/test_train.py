@@ -202,6 +202,33 @@ def test_publish_then_controller_acts_like_the_trained_policy(tmp_path):
     assert run_cli("checkpoints", "verify", "--dir", dest).exit_code == 0
 
 
+@pytest.mark.parametrize("method", ["sac_cpg", "td3"])
+def test_off_policy_weights_ship_without_critics_and_act_like_the_trained_actor(tmp_path, method):
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    from hexbench.env import HexapodEnv
+    from hexbench.policy import algo_class
+
+    out, dest = tmp_path / "run", tmp_path / "checkpoints"
+    assert train_tiny(method, out, steps=64).exit_code == 0
+    assert run_cli("checkpoints", "publish", out, "--dest", dest).exit_code == 0
+    _, params, _ = load_from_zip_file(dest / f"{method}-rough.zip", load_data=False, device="cpu")
+    assert params["policy"] and all(k.startswith("actor.") for k in params["policy"])  # no critic, no targets
+
+    config = load_baseline(method).CONFIG
+    rough5 = task("rough", 5)
+    ctrl = make_policy_controller(config, dest, method, rough5)
+    env = HexapodEnv(rough5.env_config(config.action_mode))
+    obs, _ = env.reset(seed=3)
+    ctrl.reset(3)
+    action = ctrl.act(obs)
+    env.close()
+    run = json.loads((out / "run.json").read_text())
+    model = algo_class(config.algo).load(out / run["checkpoints"][-1]["file"], device="cpu")
+    expected, _ = model.predict(scale_observation(obs), deterministic=True)
+    np.testing.assert_allclose(action, np.clip(expected, -1, 1), atol=1e-6)
+
+
 def test_corrupt_missing_or_unlisted_shipped_checkpoint_is_refused(tmp_path):
     out, dest = tmp_path / "run", tmp_path / "checkpoints"
     assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
