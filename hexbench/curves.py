@@ -3,7 +3,8 @@
     hexbench curves training/ppo_cpg-rough-seed0 training/ppo-rough-seed0 --out leaderboard/curves/rough.png
 
 Each run directory contributes one line per panel: at every logged env-step count, the mean over
-its envs of the mean episode reward of their last 20 episodes, and the mean curriculum level. A run
+its envs of the mean episode reward and of the success rate of their last 20 episodes, and the mean
+curriculum level (the success rate shows progress within a level, e.g. in the first 60k steps). A run
 that has not reached its env-step budget is labelled "partial: N of M steps", one trained without
 the early-end penalty says so; labels are run directory names, with the initial policy std and
 whether rewards were normalised. The CSVs plotted are copied next to the PNG as <run directory name>.csv, so the figure can be regenerated from
@@ -99,7 +100,7 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
     if max_env_steps is not None and max_env_steps <= 0:
         raise CurvesError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
     loaded = [load_progress(Path(s), max_env_steps) for s in sources]
-    fig, (ax_r, ax_l) = plt.subplots(2, 1, figsize=(9, 8), sharex=True)
+    fig, (ax_r, ax_s, ax_l) = plt.subplots(3, 1, figsize=(9, 10.5), sharex=True, height_ratios=(3, 2, 2))
     runs_of_method: dict[str, int] = {}
     for source, (agg, label, run) in zip(sources, loaded):
         # one colour per method, one line style per run of it (seeds), so seeds read as a group
@@ -108,14 +109,18 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
         style = {"color": METHOD_COLOURS.get(method, f"C{len(runs_of_method) + 5}"),
                  "linestyle": SEED_LINESTYLES[k % len(SEED_LINESTYLES)], "label": label}
         ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], **style)
+        ax_s.plot(agg["env_steps"], agg["success_rate"], **style)
         ax_l.step(agg["env_steps"], agg["curriculum_level"], where="post", **style)
     ax_r.set_ylabel("mean episode reward\n(last 20 episodes per env)")
+    ax_s.set_ylabel("success rate\n(last 20 episodes per env)")
+    ax_s.set_ylim(-0.03, 1.03)
     ax_l.set_ylabel("curriculum level\n(cm or deg)")
     ax_l.set_xlabel("env steps" if max_env_steps is None else f"env steps (first {max_env_steps:,} of every run)")
     if max_env_steps is not None:
         ax_l.set_xlim(0, max_env_steps)
     ax_r.legend(fontsize=7)
     ax_r.grid(alpha=0.3)
+    ax_s.grid(alpha=0.3)
     ax_l.grid(alpha=0.3)
     fig.suptitle(title or "hexbench learning curves")
     fig.tight_layout()
