@@ -86,7 +86,7 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
 
 def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: bool = True,
                 max_env_steps: int | None = None) -> list[Path]:
-    """Write the two-panel PNG (and copies of the CSVs next to it); returns the files written.
+    """Write the three-panel PNG (and copies of the CSVs next to it); returns the files written.
 
     max_env_steps: plot every run's first that many env steps only (methods at one budget).
     """

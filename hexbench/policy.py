@@ -204,7 +204,7 @@ def save_policy_weights(policy_state: dict, path: Path) -> str:
     return sha256_file(path)
 
 
-# Parts of an SB3 policy that acting needs. PPO's value head shares nothing with acting but is small;
+# Parts of an SB3 policy that acting needs. PPO ships its whole policy (its value head is small);
 # SAC's and TD3's critics (and their target copies) are three times the actor and serve learning only.
 ACTING_PREFIXES: dict[str, tuple[str, ...]] = {"ppo": ("",), "sac": ("actor.",), "td3": ("actor.",)}
 

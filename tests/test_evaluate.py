@@ -151,6 +151,7 @@ def test_killed_run_leaves_no_worker_processes(tmp_path, sig):
                             cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.time() + 120
     workers = []
+
     def is_spawn_worker(child) -> bool:  # short-lived helpers may exit (zombie) between listing and reading
         try:
             return "spawn_main" in " ".join(child.cmdline())

@@ -144,7 +144,7 @@ def register(app: typer.Typer) -> None:
         max_env_steps: int | None = typer.Option(None, "--max-env-steps",
                                                  help="plot every run's first N env steps only (one budget)"),
     ) -> None:
-        """Plot episode reward and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
+        """Plot episode reward, success rate and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
         from rich.console import Console
 
         from hexbench.curves import CurvesError, plot_curves
