@@ -170,63 +170,42 @@ def test_initial_action_of_the_wrong_size_or_algo_is_one_line(tmp_path):
         validate_config(sac_with_start)
 
 
-def test_publish_then_controller_acts_like_the_trained_policy(tmp_path):
-    from stable_baselines3 import PPO
+@pytest.mark.parametrize("method", ["ppo_cpg", "sac_cpg", "td3"])
+def test_publish_then_controller_acts_like_the_trained_policy(tmp_path, method):
+    from stable_baselines3.common.save_util import load_from_zip_file
 
     from hexbench.env import HexapodEnv
+    from hexbench.policy import algo_class
     from hexbench.tasks import load_suite
 
     out, dest = tmp_path / "run", tmp_path / "checkpoints"
-    assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
+    assert train_tiny(method, out, steps=64).exit_code == 0
     result = run_cli("checkpoints", "publish", out, "--dest", dest)
     assert result.exit_code == 0, result.output
     manifest = json.loads((dest / "manifest.json").read_text())
-    entry = manifest["checkpoints"]["ppo_cpg-rough"]
+    entry = manifest["checkpoints"][f"{method}-rough"]
     for key in ("sha256", "command", "env_step_budget", "env_steps", "seed", "wall_time_s", "hexbench_commit"):
         assert key in entry
     assert entry["complete"] and entry["env_steps"] == 64
+    config = load_baseline(method).CONFIG
+    if config.algo in ("sac", "td3"):  # off-policy weights ship without critics and target networks
+        _, params, _ = load_from_zip_file(dest / entry["file"], load_data=False, device="cpu")
+        assert params["policy"] and all(k.startswith("actor.") for k in params["policy"])
 
     task = load_suite().task("rough", 5)
-    ctrl = make_policy_controller(load_baseline("ppo_cpg").CONFIG, dest, "ppo_cpg", task)
-    assert ctrl.action_mode == "cpg_residual"
-    env = HexapodEnv(task.env_config("cpg_residual"))
+    ctrl = make_policy_controller(config, dest, method, task)
+    assert ctrl.action_mode == config.action_mode
+    env = HexapodEnv(task.env_config(config.action_mode))
     obs, _ = env.reset(seed=3)
     ctrl.reset(3)
     action = ctrl.act(obs)
     env.close()
     assert action.shape == (18,) and np.all(np.abs(action) <= 1.0)
     run = json.loads((out / "run.json").read_text())
-    model = PPO.load(out / run["checkpoints"][-1]["file"], device="cpu")
-    expected, _ = model.predict(scale_observation(obs), deterministic=True)
-    np.testing.assert_allclose(action, np.clip(expected, -1, 1), atol=1e-6)
-    assert run_cli("checkpoints", "verify", "--dir", dest).exit_code == 0
-
-
-@pytest.mark.parametrize("method", ["sac_cpg", "td3"])
-def test_off_policy_weights_ship_without_critics_and_act_like_the_trained_actor(tmp_path, method):
-    from stable_baselines3.common.save_util import load_from_zip_file
-
-    from hexbench.env import HexapodEnv
-    from hexbench.policy import algo_class
-
-    out, dest = tmp_path / "run", tmp_path / "checkpoints"
-    assert train_tiny(method, out, steps=64).exit_code == 0
-    assert run_cli("checkpoints", "publish", out, "--dest", dest).exit_code == 0
-    _, params, _ = load_from_zip_file(dest / f"{method}-rough.zip", load_data=False, device="cpu")
-    assert params["policy"] and all(k.startswith("actor.") for k in params["policy"])  # no critic, no targets
-
-    config = load_baseline(method).CONFIG
-    rough5 = task("rough", 5)
-    ctrl = make_policy_controller(config, dest, method, rough5)
-    env = HexapodEnv(rough5.env_config(config.action_mode))
-    obs, _ = env.reset(seed=3)
-    ctrl.reset(3)
-    action = ctrl.act(obs)
-    env.close()
-    run = json.loads((out / "run.json").read_text())
     model = algo_class(config.algo).load(out / run["checkpoints"][-1]["file"], device="cpu")
     expected, _ = model.predict(scale_observation(obs), deterministic=True)
     np.testing.assert_allclose(action, np.clip(expected, -1, 1), atol=1e-6)
+    assert run_cli("checkpoints", "verify", "--dir", dest).exit_code == 0
 
 
 def test_corrupt_missing_or_unlisted_shipped_checkpoint_is_refused(tmp_path):
