@@ -17,6 +17,11 @@ Extra courses (the mixed course) are scored apart: their records live in `leader
 are validated the same way against the course's levels and seeds, and render
 `leaderboard/courses/README.md`; they are never ranked with the full run.
 
+Training budget (shown, not ranked): a measured record names its checkpoint files with their sha256;
+the build reads the manifest.json beside them (paths relative to the repository, `build(root=)`)
+and shows the stated env-step budget of the entries with those sha256s, or `?` when a checkpoint
+has none (its weights changed after the record was made).
+
 Records of different protocol versions are never mixed: a build shows one protocol; records of
 other protocols are skipped with a line saying so.
 
@@ -101,6 +106,7 @@ class Board:
     terrain_ranks: dict  # terrain -> {label: rank}
     overall_ranks: dict  # label -> rank
     reported_notes: tuple[tuple[str, str], ...] = ()  # (citation, note) per reported record
+    training: dict = field(default_factory=dict)  # label -> Training of each measured row
 
 
 @dataclass
@@ -261,7 +267,8 @@ def measured_row(record: dict, where: str, course: bool = False) -> Row:
     prov, ctrl = record["provenance"], record["controller"]
     details = {
         "controller_file": ctrl["file"], "controller_sha256": ctrl["sha256"], "action_mode": ctrl["action_mode"],
-        "checkpoints": [c["sha256"] for c in ctrl.get("checkpoints", [])], "git_commit": prov["git_commit"],
+        "checkpoints": [c["sha256"] for c in ctrl.get("checkpoints", [])],
+        "checkpoint_files": [(c["path"], c["sha256"]) for c in ctrl.get("checkpoints", [])], "git_commit": prov["git_commit"],
         "command": prov["command"], "hexbench_version": prov["hexbench_version"], "started_at": prov["started_at"],
         "wall_time_s": prov["wall_time_s"], "workers": prov["workers"], "episodes": len(record["episodes"]),
     }
@@ -373,6 +380,66 @@ def load_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
     return result
 
 
+# -------------------------------------------------------------------------- training budget
+@dataclass(frozen=True)
+class Training:
+    """What a measured controller's checkpoints were trained with, read from the checkpoint manifest.
+
+    `budgets` and `env_steps` are sorted distinct values over its checkpoints: () for a controller
+    without checkpoints (nothing trained, e.g. the open-loop CPG); `known` is False when some
+    checkpoint has no manifest entry with its sha256 (the weights changed since the record, or
+    they come from elsewhere), and then nothing is claimed.
+    """
+
+    known: bool
+    budgets: tuple[int, ...] = ()  # stated env-step budgets [env steps]
+    env_steps: tuple[int, ...] = ()  # env steps at the shipped checkpoints [env steps]
+
+
+def checkpoint_manifest_entry(path: str, sha256: str, root: Path) -> dict | None:
+    """The entry of the manifest.json beside checkpoint `path` (relative to `root`) whose sha256 matches."""
+    manifest = (Path(root) / path).parent / "manifest.json"
+    try:
+        entries = json.loads(manifest.read_text()).get("checkpoints", {})
+    except (OSError, ValueError, AttributeError):
+        return None
+    matches = [e for e in entries.values() if isinstance(e, dict) and e.get("sha256") == sha256] \
+        if isinstance(entries, dict) else []
+    return matches[0] if matches else None
+
+
+def training_of(row: Row, root: Path) -> Training:
+    files = row.details.get("checkpoint_files", [])
+    entries = [checkpoint_manifest_entry(path, sha, root) for path, sha in files]
+    if any(e is None or not isinstance(e.get("env_step_budget"), int) or not isinstance(e.get("env_steps"), int)
+           for e in entries):
+        return Training(known=False)
+    return Training(known=True, budgets=tuple(sorted({e["env_step_budget"] for e in entries})),
+                    env_steps=tuple(sorted({e["env_steps"] for e in entries})))
+
+
+def fmt_env_steps(n: int) -> str:
+    """1000000 -> "1M", 60000 -> "60k", 180502 -> "181k"."""
+    if n >= 1_000_000:
+        return f"{n / 1_000_000:.3g}M"
+    if n >= 1_000:
+        return f"{n / 1_000:.3g}k"
+    return str(n)
+
+
+def fmt_steps_range(values: tuple[int, ...]) -> str:
+    if not values:
+        return "–"
+    low, high = fmt_env_steps(values[0]), fmt_env_steps(values[-1])
+    return low if low == high else f"{low}–{high}"
+
+
+def fmt_budget(training: Training | None) -> str:
+    if training is None or not training.known:
+        return "?"
+    return "none" if not training.budgets else fmt_steps_range(training.budgets)
+
+
 # ---------------------------------------------------------------------------------- ranking
 def _terrain_key(summary: dict | None) -> tuple[float, float]:
     if summary is None:
@@ -416,13 +483,15 @@ def rank_overall(rows: list[Row], terrains: tuple[str, ...]) -> tuple[list[Row],
     return ordered, terrain_ranks, overall
 
 
-def make_board(load: LoadResult, protocol: str = DEFAULT_PROTOCOL) -> Board:
+def make_board(load: LoadResult, protocol: str = DEFAULT_PROTOCOL, root: Path | None = None) -> Board:
+    """Rank the loaded rows; `root` is where records' checkpoint paths resolve (None: budgets unknown)."""
     suite = load_suite(protocol)
     measured = [r for r in load.rows if r.kind == "measured"]
     reported = [r for r in load.rows if r.kind == "reported"]
     ordered, terrain_ranks, overall = rank_overall(measured, suite.terrains)
     notes = tuple(dict.fromkeys((r.details["citation"], r.details["note"]) for r in reported))
-    return Board(protocol, suite, tuple(ordered), tuple(reported), terrain_ranks, overall, notes)
+    training = {r.label: training_of(r, root) if root is not None else Training(known=False) for r in measured}
+    return Board(protocol, suite, tuple(ordered), tuple(reported), terrain_ranks, overall, notes, training)
 
 
 # ------------------------------------------------------------------------------ formatting
@@ -484,6 +553,18 @@ def _md_cell(lv: dict | None, with_ci: bool) -> str:
     return f"{pct(lv['success_rate'])} ({100 * lv['ci95_low']:.0f}–{100 * lv['ci95_high']:.0f})"
 
 
+TRAINING_NOTE = ("Training budget: the stated env-step budget the controller's shipped weights were trained with, "
+                 "read from the manifest beside its checkpoints and matched by sha256 (`none`: no trained weights; "
+                 "`?`: a checkpoint has no matching manifest entry). Methods trained with different budgets are "
+                 "not a like-for-like comparison.")
+
+
+def _fmt_checkpoint_steps(training: Training | None) -> str:
+    if training is None or not training.known:
+        return "?"
+    return fmt_steps_range(training.env_steps)
+
+
 def render_readme(board: Board) -> str:
     suite, out = board.suite, []
     out.append(f"# hexbench leaderboard: protocol {board.protocol}\n")
@@ -496,14 +577,14 @@ def render_readme(board: Board) -> str:
     out.append("## Ranking\n")
     out.append(RANKING_RULE + "\n")
     if board.measured:
-        header = ["Rank", "Controller"]
+        header = ["Rank", "Controller", "Training budget [env steps]"]
         for t in suite.terrains:
             header += [f"{TERRAIN_TITLES.get(t, t)}: hardest passed", f"{TERRAIN_TITLES.get(t, t)}: AUC"]
         header += ["Mean speed [m/s]", "Roll RMS [deg]", "Pitch RMS [deg]"]
         rows = []
         for r in board.measured:
             m = overall_metrics(r)
-            cells = [str(board.overall_ranks[r.label]), r.label]
+            cells = [str(board.overall_ranks[r.label]), r.label, fmt_budget(board.training.get(r.label))]
             for t in suite.terrains:
                 s = r.terrain(t)
                 cells += [fmt_level(s["hardest_level_passed"], s["unit"]), fmt_num(s["auc"])]
@@ -511,6 +592,7 @@ def render_readme(board: Board) -> str:
                       fmt_num(m["mean_pitch_rms_deg"], 1)]
             rows.append(cells)
         out.append(_md_table(header, rows, ["r", "l"] + ["r"] * (len(header) - 2)) + "\n")
+        out.append(TRAINING_NOTE + "\n")
     else:
         out.append("No measured records yet.\n")
     for terrain in suite.terrains:
@@ -564,11 +646,13 @@ def render_readme(board: Board) -> str:
             out.append(f"{citation}\n\n{note}\n")
     out.append("## Records\n")
     if board.measured:
-        header = ["Controller", "Record", "Controller file", "sha256", "Action mode", "git commit", "Episodes",
-                  "Wall time [s]", "Command"]
+        header = ["Controller", "Record", "Controller file", "sha256", "Action mode", "Training budget",
+                  "Shipped checkpoints at [env steps]", "git commit", "Episodes", "Wall time [s]", "Command"]
         rows = [[r.label, r.source, r.details["controller_file"], r.details["controller_sha256"][:12],
-                 r.details["action_mode"], str(r.details["git_commit"])[:12], str(r.details["episodes"]),
-                 f"{r.details['wall_time_s']:.0f}", f"`{r.details['command']}`"] for r in board.measured]
+                 r.details["action_mode"], fmt_budget(board.training.get(r.label)),
+                 _fmt_checkpoint_steps(board.training.get(r.label)), str(r.details["git_commit"])[:12],
+                 str(r.details["episodes"]), f"{r.details['wall_time_s']:.0f}", f"`{r.details['command']}`"]
+                for r in board.measured]
         out.append(_md_table(header, rows, ["l"] * len(header)) + "\n")
     sources = sorted({r.source for r in board.reported})
     if sources:
@@ -592,7 +676,7 @@ CSV_COLUMNS = ("kind", "setting", "controller", "record", "overall_rank", "terra
                "headroom", "episodes", "successes", "success_rate", "ci95_low", "ci95_high",
                "level_mean_forward_speed_m_per_s", "terrain_hardest_level_passed", "terrain_auc",
                "terrain_headroom_auc", "terrain_mean_forward_speed_m_per_s", "terrain_mean_roll_rms_deg",
-               "terrain_mean_pitch_rms_deg")
+               "terrain_mean_pitch_rms_deg", "training_env_step_budget", "checkpoint_env_steps")
 
 
 def _csv_value(v) -> str:
@@ -603,6 +687,13 @@ def _csv_value(v) -> str:
     if isinstance(v, float):
         return repr(round(v, 6))
     return str(v)
+
+
+def _csv_training(training: Training | None) -> tuple[str | None, str | None]:
+    """Budget and checkpoint env steps as CSV cells: distinct values joined by ';', empty if unknown."""
+    if training is None or not training.known:
+        return None, None
+    return ";".join(map(str, training.budgets)), ";".join(map(str, training.env_steps))
 
 
 def render_csv(board: Board) -> str:
@@ -621,7 +712,8 @@ def render_csv(board: Board) -> str:
                 lv["terrain"], lv["unit"], lv["level"], lv["headroom"], lv["episodes"], lv["successes"],
                 lv["success_rate"], lv["ci95_low"], lv["ci95_high"], lv["mean_forward_speed_m_per_s"],
                 t["hardest_level_passed"], t["auc"], t["headroom_auc"], t["mean_forward_speed_m_per_s"],
-                t.get("mean_roll_rms_deg"), t.get("mean_pitch_rms_deg"))])
+                t.get("mean_roll_rms_deg"), t.get("mean_pitch_rms_deg"),
+                *_csv_training(board.training.get(r.label) if measured else None))])
     return buf.getvalue()
 
 
@@ -734,6 +826,9 @@ def _html_summary_table(board: Board, rows: list[Row], table_id: str, ranked: bo
             '<th data-type="text">Controller</th>']
     if not ranked:
         head.append('<th data-type="text">Setting</th>')
+    else:
+        head.append('<th data-type="num" title="stated env-step budget of the shipped weights (checkpoint manifest)">'
+                    'Training<br><span class="sub">env steps</span></th>')
     for t in suite.terrains:
         name = TERRAIN_TITLES.get(t, t)
         head.append(f'<th data-type="num" title="hardest level with success rate &gt;= 80%">{_e(name)}<br>'
@@ -754,6 +849,9 @@ def _html_summary_table(board: Board, rows: list[Row], table_id: str, ranked: bo
             cells.append(f'<td class="name"{_sort_attr(r.label)}><span class="swatch" style="background:'
                          f'{measured_color(board, r.label)}"></span>{_e(r.label)}'
                          f'<span class="mode">{_e(r.details.get("action_mode", ""))}</span></td>')
+            training = board.training.get(r.label)
+            budget = max(training.budgets) if training is not None and training.known and training.budgets else -1.0
+            cells.append(f'<td class="num"{_sort_attr(float(budget))}>{_e(fmt_budget(training))}</td>')
         else:
             cells.append(f'<td class="name"{_sort_attr(r.label)}>{_e(r.label)}<span class="badge">paper</span></td>')
             cells.append(f'<td{_sort_attr(r.setting)}>{_e(r.setting)}</td>')
@@ -995,8 +1093,12 @@ def render_courses_readme(rows: list[Row], suite: Suite) -> str:
     return "\n".join(out)
 
 
-def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCOL) -> BuildResult:
+def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCOL,
+          root: str | Path | None = None) -> BuildResult:
     """Read every record under `directory`, write README.md, index.html and leaderboard.csv there.
+
+    Records' checkpoint paths resolve against `root` (default: the directory's parent, the repository)
+    to show each controller's training budget from the checkpoint manifest.
 
     Refused records are left out and reported in `errors` (the caller decides the exit status);
     the three files are rendered completely before any is written.
@@ -1006,7 +1108,7 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
         raise RecordError(f"{directory}: no such leaderboard directory")
     load_suite(protocol)  # ValueError naming the valid protocols
     load = load_rows(directory, protocol)
-    board = make_board(load, protocol)
+    board = make_board(load, protocol, directory.resolve().parent if root is None else Path(root))
     texts = render_all(board)
     files = {directory / name: texts[name] for name in GENERATED_FILES}
     errors, skipped = list(load.errors), list(load.skipped)

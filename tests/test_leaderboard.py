@@ -223,6 +223,32 @@ def test_build_ranks_demo_controllers_and_keeps_the_paper_apart(board_dir):
     assert "| 1 | strong |" in readme and "CPG (paper): reported, not run here | 100% |" in readme
 
 
+def test_training_budget_comes_from_the_manifest_entry_with_the_checkpoint_sha256(tmp_path, records):
+    strong, middling, weak = records
+    root, board = tmp_path / "repo", tmp_path / "repo" / "leaderboard"
+    (root / "weights").mkdir(parents=True)
+    board.mkdir()
+    (root / "weights" / "manifest.json").write_text(json.dumps({"checkpoints": {
+        "a-rough": {"sha256": "a" * 64, "env_step_budget": 1_000_000, "env_steps": 180_502},
+        "a-slopes": {"sha256": "b" * 64, "env_step_budget": 1_000_000, "env_steps": 827_393}}}))
+    trained = mutated(strong, lambda r: r["controller"].update(checkpoints=[
+        {"path": "weights/a-rough.zip", "sha256": "a" * 64}, {"path": "weights/a-slopes.zip", "sha256": "b" * 64}]))
+    retrained = mutated(weak, lambda r: r["controller"].update(checkpoints=[
+        {"path": "weights/a-rough.zip", "sha256": "c" * 64}]))  # weights changed since the record
+    for r in (trained, middling, retrained):
+        (board / f"{r['label']}.json").write_text(json.dumps(r))
+    lb.build(board)
+    table = list(csv.DictReader(io.StringIO((board / "leaderboard.csv").read_text())))
+    by_label = {row["controller"]: row for row in table}
+    assert (by_label["strong"]["training_env_step_budget"], by_label["strong"]["checkpoint_env_steps"]) == (
+        "1000000", "180502;827393")
+    assert (by_label["middling"]["training_env_step_budget"], by_label["weak"]["training_env_step_budget"]) == (
+        "", "")
+    readme = (board / "README.md").read_text()
+    assert "| 1 | strong | 1M |" in readme and "| middling | none |" in readme and "| weak | ? |" in readme
+    assert "181k–827k" in readme
+
+
 # ------------------------------------------------------------------------------ determinism
 def test_building_twice_gives_byte_identical_files(board_dir, tmp_path):
     lb.build(board_dir)
@@ -313,7 +339,7 @@ def test_committed_leaderboard_is_what_build_produces(tmp_path):
     copy.mkdir()
     for p in lb.record_files(committed):
         shutil.copy(p, copy / p.name)
-    lb.build(copy)
+    lb.build(copy, root=REPO)  # checkpoint paths in the records resolve against the repository
     names = list(lb.GENERATED_FILES)
     if f'content="{lb.generator_tag()}"' not in (committed / "index.html").read_text():
         names.remove("index.html")  # plots drawn by another matplotlib version: SVG bytes legitimately differ
