@@ -5,7 +5,8 @@ builds a fresh environment and controller, plays until the episode ends and retu
 outcome row (and, when recording, its log files). `evaluate(...)` fans episodes out over
 worker processes, journals each finished episode under OUT/.journal/ (so a re-run with the
 same OUT skips it), and at the end writes OUT/episodes.parquet and OUT/result.json, each to a
-temporary name first. A controller that misbehaves stops its run with a `ControllerError`;
+temporary name first. A resumed run's record counts the wall time of every invocation that
+produced its episodes (`run_time`). A controller that misbehaves stops its run with a `ControllerError`;
 the run's journal entries are removed so no partial result remains.
 """
 
@@ -291,6 +292,23 @@ def build_record(*, label: str, controller_file: str, action_mode: str, tasks: l
     return record
 
 
+def run_time(timings) -> tuple[str, float]:
+    """When a run began and how long it took, over every invocation that produced its episodes.
+
+    `timings` holds (invocation id, its ISO start time, elapsed [s]) per journaled episode, plus one
+    for the invocation finishing the run. A resumed run (killed, then run again with the same OUT)
+    is made by several invocations: it began at the earliest start, and its wall time is the sum,
+    over invocations, of the longest elapsed time each reached. Time an invocation spent after its
+    last journaled episode (work lost to the kill) is not counted.
+    """
+    latest: dict[str, float] = {}
+    starts: dict[str, str] = {}
+    for invocation, started_at, elapsed_s in timings:
+        latest[invocation] = max(latest.get(invocation, 0.0), elapsed_s)
+        starts[invocation] = started_at
+    return min(starts.values()), sum(latest.values())
+
+
 def _atomic_write_text(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.tmp")
     tmp.write_text(text)
@@ -351,6 +369,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     jobs = [EpisodeJob(controller_file, t, i, s, record_dir)
             for t in tasks for i, s in enumerate(t.seeds(episodes))]
     done: dict[str, dict] = {}
+    timing: dict[str, tuple[str, str, float]] = {}  # episode id -> (invocation, its start, elapsed [s] at journaling)
     for job in jobs:
         f = journal / f"{job.episode_id}.json"
         if f.exists():
@@ -360,18 +379,24 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
                     and sorted(w["sha256"] for w in entry.get("weights", [])) == weight_shas[job.task.terrain] \
                     and entry["row"]["seed"] == job.seed and (not record or "mcap_path" in entry["row"]):
                 done[job.episode_id] = entry["row"]
+                if "invocation" in entry:  # journals written before invocations were kept have no timing
+                    timing[job.episode_id] = (entry["invocation"], entry["invocation_started_at"], entry["elapsed_s"])
     todo = [j for j in jobs if j.episode_id not in done]
     written: list[Path] = []
     started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    invocation = f"{started_at}/{os.getpid()}"
     commit = git_commit()  # the code that runs, taken before the first episode
     t0 = time.perf_counter()
 
     def _journal(job: EpisodeJob, row: dict) -> None:
         f = journal / f"{job.episode_id}.json"
+        elapsed_s = time.perf_counter() - t0
         _atomic_write_text(f, json.dumps({"controller_sha256": sha, "protocol": job.task.protocol,
-                                          "weights": weights[job.task.terrain], "row": row}))
+                                          "weights": weights[job.task.terrain], "invocation": invocation,
+                                          "invocation_started_at": started_at, "elapsed_s": elapsed_s, "row": row}))
         written.append(f)
         done[job.episode_id] = row
+        timing[job.episode_id] = (invocation, started_at, elapsed_s)
 
     error = None
     try:
@@ -415,8 +440,10 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
         return RunResult(None, out, error)
 
     rows = [done[j.episode_id] for j in jobs]
+    timing["<this invocation>"] = (invocation, started_at, time.perf_counter() - t0)
+    run_started_at, wall_time_s = run_time(timing.values())
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
-                       started_at=started_at, wall_time_s=time.perf_counter() - t0, workers=workers,
+                       started_at=run_started_at, wall_time_s=wall_time_s, workers=workers,
                        command=command, checkpoints=checkpoints, commit=commit)
     import pandas as pd
 

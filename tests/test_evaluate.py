@@ -13,7 +13,7 @@ import pytest
 from typer.testing import CliRunner
 
 from hexbench.cli import app
-from hexbench.evaluate import EpisodeJob, evaluate, run_episode
+from hexbench.evaluate import EpisodeJob, evaluate, run_episode, run_time
 from hexbench.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
@@ -140,6 +140,13 @@ def test_interrupted_run_resumes_to_the_same_record(tmp_path):
     resumed = json.loads((interrupted / "result.json").read_text())
     reference = json.loads((fresh / "result.json").read_text())
     assert _strip_timing(resumed) == _strip_timing(reference)
+
+
+def test_resumed_run_time_sums_every_invocation_from_the_earliest_start():
+    killed = [("a", "2026-01-01T10:00:00+00:00", 3.0), ("a", "2026-01-01T10:00:00+00:00", 5.0)]
+    resumed = [("b", "2026-01-01T11:00:00+00:00", 2.0), ("b", "2026-01-01T11:00:00+00:00", 4.5)]
+    assert run_time(killed + resumed) == ("2026-01-01T10:00:00+00:00", 9.5)
+    assert run_time(resumed) == ("2026-01-01T11:00:00+00:00", 4.5)
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
