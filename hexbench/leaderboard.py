@@ -396,21 +396,26 @@ class Training:
     env_steps: tuple[int, ...] = ()  # env steps at the shipped checkpoints [env steps]
 
 
-def checkpoint_manifest_entry(path: str, sha256: str, root: Path) -> dict | None:
-    """The entry of the manifest.json beside checkpoint `path` (relative to `root`) whose sha256 matches."""
-    manifest = (Path(root) / path).parent / "manifest.json"
+def manifest_entries_by_sha256(manifest: Path) -> dict[str, dict]:
+    """A checkpoint manifest's entries keyed by their sha256 ({} if it is missing or unreadable)."""
     try:
-        entries = json.loads(manifest.read_text()).get("checkpoints", {})
+        entries = json.loads(Path(manifest).read_text()).get("checkpoints", {})
     except (OSError, ValueError, AttributeError):
-        return None
-    matches = [e for e in entries.values() if isinstance(e, dict) and e.get("sha256") == sha256] \
-        if isinstance(entries, dict) else []
-    return matches[0] if matches else None
+        return {}
+    if not isinstance(entries, dict):
+        return {}
+    return {e["sha256"]: e for e in entries.values() if isinstance(e, dict) and isinstance(e.get("sha256"), str)}
 
 
 def training_of(row: Row, root: Path) -> Training:
-    files = row.details.get("checkpoint_files", [])
-    entries = [checkpoint_manifest_entry(path, sha, root) for path, sha in files]
+    """Training of a measured row from the manifests beside its checkpoints (paths relative to `root`)."""
+    manifests: dict[Path, dict[str, dict]] = {}
+    entries = []
+    for path, sha256 in row.details.get("checkpoint_files", []):
+        manifest = (Path(root) / path).parent / "manifest.json"
+        if manifest not in manifests:
+            manifests[manifest] = manifest_entries_by_sha256(manifest)
+        entries.append(manifests[manifest].get(sha256))
     if any(e is None or not isinstance(e.get("env_step_budget"), int) or not isinstance(e.get("env_steps"), int)
            for e in entries):
         return Training(known=False)
