@@ -238,6 +238,14 @@ def test_record_lists_the_weights_files_a_trained_baseline_loads(tmp_path):
     assert listed[0]["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
 
 
+@pytest.mark.parametrize("baseline", sorted(p.name for p in (REPO / "baselines").glob("*.py")))
+def test_every_shipped_baseline_acts_from_its_weights_on_every_terrain(baseline):
+    """A fresh clone can run each baseline: its weights (verified by sha256) are there for every terrain."""
+    res = invoke(["check", str(REPO / "baselines" / baseline), "--steps", "3"])
+    assert res.exit_code == 0, res.stderr
+    assert res.stdout.count(": ok") == len(load_suite("v1").terrains)
+
+
 def test_resume_reruns_episodes_whose_weights_changed(tmp_path):
     weights = tmp_path / "weights.bin"
     weights.write_bytes(b"first weights")
