@@ -440,8 +440,7 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
         return RunResult(None, out, error)
 
     rows = [done[j.episode_id] for j in jobs]
-    timing["<this invocation>"] = (invocation, started_at, time.perf_counter() - t0)
-    run_started_at, wall_time_s = run_time(timing.values())
+    run_started_at, wall_time_s = run_time([*timing.values(), (invocation, started_at, time.perf_counter() - t0)])
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
                        started_at=run_started_at, wall_time_s=wall_time_s, workers=workers,
                        command=command, checkpoints=checkpoints, commit=commit)
