@@ -235,8 +235,16 @@ def test_epsilon_sweep_and_learning_curves(tmp_path):
     assert result.exit_code == 0, result.output
     assert "best eps" in result.output
     rows = (sweep_dir / "epsilon.csv").read_text().splitlines()
-    assert rows[0].startswith("eps,trial,seed,level") and len(rows) == 3
-    assert rows[1].split(",")[3] == "8.0"  # the hardest stairs level of the curriculum
+    assert rows[0].startswith("terrain,eps,trial,seed,level") and len(rows) == 3
+    assert rows[1].split(",")[4] == "8.0"  # the hardest stairs level of the curriculum
+
+    plot_png = tmp_path / "epsilon" / "epsilon.png"
+    result = run_cli("sweep", "plot", sweep_dir, "--out", plot_png)
+    assert result.exit_code == 0, result.output
+    assert plot_png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (plot_png.parent / "epsilon-stairs.csv").read_text() == (sweep_dir / "epsilon.csv").read_text()
+    bad = run_cli("sweep", "plot", tmp_path / "nowhere", "--out", plot_png)
+    assert bad.exit_code == 2 and "no such sweep folder" in bad.output
 
     png = tmp_path / "curves" / "stairs.png"
     result = run_cli("curves", sweep_dir / "eps0.20-trial0", sweep_dir / "eps0.60-trial0", "--out", png)

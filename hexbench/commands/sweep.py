@@ -65,3 +65,21 @@ def register(app: typer.Typer) -> None:
                           f"{sum(ep) / len(ep):.1f}" if ep else "-", f"{100 * sum(sr) / len(sr):.0f}%" if sr else "-")
         Console().print(table)
         Console().print(f"best eps {best:g} (paper: {PAPER_EPS[terrain]:g}); rows in {spec.folder / 'epsilon.csv'}")
+
+    @sweep.command("plot")
+    def plot_command(
+        sources: list[Path] = typer.Argument(..., help="sweep folders or their epsilon.csv, one per terrain"),
+        out: Path = typer.Option(Path("leaderboard/epsilon/epsilon.png"), "--out", help="PNG to write"),
+    ) -> None:
+        """Plot eps sweeps (score against eps, best and paper's eps marked); copy their CSVs beside the PNG."""
+        from rich.console import Console
+
+        from hexbench.sweep import SweepError, plot_sweeps
+
+        console = Console(stderr=True)
+        try:
+            written = plot_sweeps(sources, out)
+        except SweepError as e:
+            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            raise typer.Exit(2) from None
+        Console().print("wrote " + ", ".join(str(p) for p in written), soft_wrap=True)
