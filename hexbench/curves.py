@@ -84,6 +84,24 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
     return agg, label, run
 
 
+def save_png(fig, out_png: Path) -> Path:
+    """Write a matplotlib figure as a PNG atomically (no partial file if it fails) and close it."""
+    import matplotlib.pyplot as plt
+
+    out_png = Path(out_png)
+    out_png.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out_png.with_name(out_png.stem + ".tmp.png")
+    try:
+        fig.savefig(tmp, dpi=110)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(fig)
+    tmp.replace(out_png)
+    return out_png
+
+
 def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: bool = True,
                 max_env_steps: int | None = None) -> list[Path]:
     """Write the three-panel PNG (and copies of the CSVs next to it); returns the files written.
@@ -124,12 +142,7 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
     ax_l.grid(alpha=0.3)
     fig.suptitle(title or "hexbench learning curves")
     fig.tight_layout()
-    out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_png.with_name(out_png.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(out_png)
+    out_png = save_png(fig, out_png)
     written = [out_png]
     if copy_csv:
         for source, (_agg, _label, run) in zip(sources, loaded):

@@ -136,6 +136,8 @@ def plot_sweeps(sources: list[Path], out_png: Path) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from hexbench.curves import save_png
+
     if not sources:
         raise SweepError("no sweeps given; pass sweep folders (training/sweep-epsilon-...) or epsilon CSVs")
     loaded = [(Path(s), *read_sweep(Path(s))) for s in sources]
@@ -161,12 +163,7 @@ def plot_sweeps(sources: list[Path], out_png: Path) -> list[Path]:
     axes[0][0].set_ylabel("mean reward per env step")
     fig.suptitle("epsilon search (paper 3.2)\nPPO-CPG trained at the hardest curriculum level", fontsize=10)
     fig.tight_layout()
-    out_png = Path(out_png)
-    out_png.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_png.with_name(out_png.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    tmp.replace(out_png)
+    out_png = save_png(fig, out_png)
     written = [out_png]
     for source, terrain, _ in loaded:
         csv_path = source / "epsilon.csv" if source.is_dir() else source
