@@ -124,8 +124,11 @@ def read_sweep(source: Path) -> tuple[str, list[dict]]:
     terrains = {r["terrain"] for r in raw}
     if len(terrains) != 1 or not terrains <= set(PAPER_EPS):
         raise SweepError(f"{csv_path}: expected one terrain of {', '.join(PAPER_EPS)}; found {', '.join(sorted(terrains))}")
-    rows = [{k: (r[k] if k == "terrain" else None if r[k] == "" else float(r[k])) for k in SWEEP_COLUMNS}
-            for r in raw]
+    try:
+        rows = [{k: (r[k] if k == "terrain" else None if r[k] == "" else float(r[k])) for k in SWEEP_COLUMNS}
+                for r in raw]
+    except ValueError as e:
+        raise SweepError(f"{csv_path}: not a hexbench sweep CSV ({e})") from None
     return terrains.pop(), rows
 
 
