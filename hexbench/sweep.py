@@ -105,8 +105,8 @@ class SweepError(Exception):
     """A sweep result cannot be read or plotted; the message is one line."""
 
 
-def read_sweep(source: Path) -> tuple[str, list[dict]]:
-    """(terrain, rows) of a sweep folder or its epsilon.csv; numbers parsed, empty cells None."""
+def read_sweep(source: Path) -> tuple[Path, str, list[dict]]:
+    """(the CSV read, terrain, rows) of a sweep folder or its epsilon.csv; numbers parsed, empty cells None."""
     source = Path(source)
     csv_path = source / "epsilon.csv" if source.is_dir() else source
     if not source.exists():
@@ -129,7 +129,7 @@ def read_sweep(source: Path) -> tuple[str, list[dict]]:
                 for r in raw]
     except ValueError as e:
         raise SweepError(f"{csv_path}: not a hexbench sweep CSV ({e})") from None
-    return terrains.pop(), rows
+    return csv_path, terrains.pop(), rows
 
 
 def plot_sweeps(sources: list[Path], out_png: Path) -> list[Path]:
@@ -143,7 +143,7 @@ def plot_sweeps(sources: list[Path], out_png: Path) -> list[Path]:
 
     if not sources:
         raise SweepError("no sweeps given; pass sweep folders (training/sweep-epsilon-...) or epsilon CSVs")
-    loaded = [(Path(s), *read_sweep(Path(s))) for s in sources]
+    loaded = [read_sweep(Path(s)) for s in sources]
     terrains = [t for _, t, _ in loaded]
     if len(set(terrains)) != len(terrains):
         raise SweepError(f"one sweep per terrain, please; got {', '.join(terrains)}")
@@ -168,8 +168,7 @@ def plot_sweeps(sources: list[Path], out_png: Path) -> list[Path]:
     fig.tight_layout()
     out_png = save_png(fig, out_png)
     written = [out_png]
-    for source, terrain, _ in loaded:
-        csv_path = source / "epsilon.csv" if source.is_dir() else source
+    for csv_path, terrain, _ in loaded:
         dest = out_png.parent / f"epsilon-{terrain}.csv"
         if csv_path.resolve() != dest.resolve():
             shutil.copyfile(csv_path, dest)
