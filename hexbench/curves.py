@@ -26,6 +26,8 @@ from hexbench.train import CSV_COLUMNS
 METHOD_COLOURS: dict[str, str] = {"ppo_cpg": "C0", "ppo": "C3", "hrl": "C2", "sac_cpg": "C1", "td3_cpg": "C4",
                                    "sac": "C5", "td3": "C6"}
 SEED_LINESTYLES: tuple[str, ...] = ("-", "--", ":", "-.")
+# colours for a method's second and further configs (ablations) and for unknown methods
+EXTRA_COLOURS: tuple[str, ...] = ("C7", "C8", "C9", "black", "olive", "teal")
 
 
 class CurvesError(Exception):
@@ -102,6 +104,25 @@ def save_png(fig, out_png: Path) -> Path:
     return out_png
 
 
+def line_styles(runs: list[tuple[str, dict | None]]) -> list[dict[str, str]]:
+    """Colour and line style per (method, run.json) so that seeds read as a group: one colour per
+    method and config (a method's first config gets the method's colour, another config of it, an
+    ablation, the next free one), one line style per seed within it."""
+    runs_of_group: dict[tuple[str, str], int] = {}
+    group_colour: dict[tuple[str, str], str] = {}
+    styles = []
+    for method, run in runs:
+        group = (method, json.dumps((run or {}).get("config"), sort_keys=True))
+        if group not in group_colour:
+            first_of_method = all(m != method for m, _ in group_colour)
+            extra = sum(c in EXTRA_COLOURS for c in group_colour.values())
+            group_colour[group] = (METHOD_COLOURS.get(method) if first_of_method else None) \
+                or EXTRA_COLOURS[extra % len(EXTRA_COLOURS)]
+        k = runs_of_group[group] = runs_of_group.get(group, -1) + 1
+        styles.append({"color": group_colour[group], "linestyle": SEED_LINESTYLES[k % len(SEED_LINESTYLES)]})
+    return styles
+
+
 def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: bool = True,
                 max_env_steps: int | None = None) -> list[Path]:
     """Write the three-panel PNG (and copies of the CSVs next to it); returns the files written.
@@ -119,13 +140,11 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
         raise CurvesError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
     loaded = [load_progress(Path(s), max_env_steps) for s in sources]
     fig, (ax_r, ax_s, ax_l) = plt.subplots(3, 1, figsize=(9, 10.5), sharex=True, height_ratios=(3, 2, 2))
-    runs_of_method: dict[str, int] = {}
-    for source, (agg, label, run) in zip(sources, loaded):
-        # one colour per method, one line style per run of it (seeds), so seeds read as a group
-        method = run.get("method") if run else Path(source).stem.split("-")[0]
-        k = runs_of_method[method] = runs_of_method.get(method, -1) + 1
-        style = {"color": METHOD_COLOURS.get(method, f"C{len(runs_of_method) + 5}"),
-                 "linestyle": SEED_LINESTYLES[k % len(SEED_LINESTYLES)], "label": label}
+    methods = [run.get("method") if run else Path(source).stem.split("-")[0]
+               for source, (_agg, _label, run) in zip(sources, loaded)]
+    styles = line_styles([(method, run) for method, (_agg, _label, run) in zip(methods, loaded)])
+    for (agg, label, _run), style in zip(loaded, styles):
+        style = {**style, "label": label}
         ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], **style)
         ax_s.plot(agg["env_steps"], agg["success_rate"], **style)
         ax_l.step(agg["env_steps"], agg["curriculum_level"], where="post", **style)

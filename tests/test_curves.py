@@ -5,7 +5,7 @@ import json
 import pandas as pd
 import pytest
 
-from hexbench.curves import CurvesError, load_progress, plot_curves
+from hexbench.curves import CurvesError, line_styles, load_progress, plot_curves
 from hexbench.train import CSV_COLUMNS
 
 
@@ -41,3 +41,16 @@ def test_a_window_keeps_each_runs_first_steps_and_says_which_runs_had_a_smaller_
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(CurvesError, match="positive"):
         plot_curves([long_run], png, max_env_steps=0, copy_csv=False)
+
+
+def test_seeds_of_one_config_share_a_colour_and_an_ablation_of_the_same_method_gets_its_own():
+    paper = {"method": "ppo_cpg", "config": {"log_std_init": -2.3}}
+    ablation = {"method": "ppo_cpg", "config": {"log_std_init": -3.0}}
+    other = {"method": "ppo", "config": {"log_std_init": -1.0}}
+    runs = [("ppo_cpg", paper), ("ppo_cpg", paper), ("ppo", other), ("ppo_cpg", ablation), ("ppo_cpg", ablation)]
+    s = line_styles(runs)
+    assert s[0]["color"] == s[1]["color"] and s[0]["linestyle"] != s[1]["linestyle"]  # two seeds
+    assert s[3]["color"] == s[4]["color"] and s[3]["linestyle"] != s[4]["linestyle"]
+    assert len({s[0]["color"], s[2]["color"], s[3]["color"]}) == 3  # paper config, other method, ablation
+    # a figure of one config per method keeps each method's colour whatever the ablations elsewhere
+    assert line_styles([("ppo_cpg", paper)])[0]["color"] == s[0]["color"]
