@@ -11,7 +11,13 @@ bound (printed with ">").
     python bench/sample_efficiency.py --level 6 --reference ppo leaderboard/curves/*rough*.csv
 
 Ratio = median steps of the reference method / median steps of each other method (> 1: the other
-method needs fewer env steps). Progress rows are written once a minute, so a step count is exact
+method needs fewer env steps). Runs of one method whose configs differ (an ablation) form separate
+groups, labelled by the fields that differ:
+
+    python bench/sample_efficiency.py --level 11 --reference "ppo_cpg{log_std_init=-2.3}" \\
+        leaderboard/curves/ppo_cpg-rough-seed{0,1,2}-v4.csv leaderboard/curves/ppo_cpg-rough-seed{0,1}-std05.csv
+
+Progress rows are written once a minute, so a step count is exact
 to about one minute of training.
 """
 
@@ -44,39 +50,58 @@ def steps_to_level(progress: pd.DataFrame, level: float) -> tuple[int, bool]:
     return int(per_step.index.max()), False
 
 
+def group_labels(runs: list[dict]) -> list[str]:
+    """A label per run: its method, plus the config fields in which runs of that method and terrain
+    differ, e.g. "ppo_cpg{log_std_init=-3.0}" beside "ppo_cpg{log_std_init=-2.3}" (an ablation).
+    Runs are only compared within one label, so configs never mix in a median."""
+    configs: dict[tuple[str, str], list[dict]] = {}
+    for run in runs:
+        configs.setdefault((run["method"], run["terrain"]), []).append(run["config"])
+    labels = []
+    for run in runs:
+        group = configs[(run["method"], run["terrain"])]
+        differing = sorted({k for c in group for k in c if any(c.get(k) != other.get(k) for other in group)})
+        tag = ",".join(f"{k}={run['config'].get(k)}" for k in differing)
+        labels.append(f"{run['method']}{{{tag}}}" if tag else run["method"])
+    return labels
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("sources", nargs="+", type=Path)
     ap.add_argument("--level", type=float, default=6.0, help="curriculum level to reach (paper units)")
-    ap.add_argument("--reference", default="ppo", help="method the others are compared with")
+    ap.add_argument("--reference", default="ppo",
+                    help="label (method, or method{field=value,...} when configs differ) the others are compared with")
     args = ap.parse_args()
 
-    by_method: dict[tuple[str, str], list[tuple[int, bool, str]]] = {}
-    for source in args.sources:
-        progress, run = load(source)
+    loaded = [(source, *load(source)) for source in args.sources]
+    labels = group_labels([run for _, _, run in loaded])
+    by_label: dict[tuple[str, str], list[tuple[int, bool, str]]] = {}
+    for (source, progress, run), label in zip(loaded, labels):
         steps, reached = steps_to_level(progress, args.level)
-        # runs are only compared under the same training reward (early-end penalty on or off)
-        key = (run["method"], run["terrain"], bool(run["config"].get("early_end_penalty", False)))
-        by_method.setdefault(key, []).append((steps, reached, str(source)))
+        by_label.setdefault((label, run["terrain"]), []).append((steps, reached, str(source)))
         mark = "" if reached else " (not reached: censored)"
-        print(f"{run['method']:>8} {run['terrain']:<7} seed {run['seed']} (penalty {'on' if key[2] else 'off'}): "
+        print(f"{label} {run['terrain']} seed {run['seed']}: "
               f"{'' if reached else '>'}{steps:,} env steps to level {args.level:g}{mark}  [{source}]")
 
-    for (method, terrain, penalty), runs in sorted(by_method.items()):
-        if method == args.reference or (args.reference, terrain, penalty) not in by_method:
+    known = sorted({label for label, _ in by_label})
+    if args.reference not in known:
+        sys.exit(f"--reference {args.reference!r} matches no run; labels here: {', '.join(known)}")
+    for (label, terrain), runs in sorted(by_label.items()):
+        if label == args.reference or (args.reference, terrain) not in by_label:
             continue
-        ref = by_method[(args.reference, terrain, penalty)]
+        ref = by_label[(args.reference, terrain)]
         ref_median = statistics.median(s for s, _, _ in ref)
         median = statistics.median(s for s, _, _ in runs)
         ref_censored = not all(r for _, r, _ in ref)
         censored = not all(r for _, r, _ in runs)
         if censored:  # its median is then a lower bound too, and the ratio bounds nothing
-            print(f"{terrain} (penalty {'on' if penalty else 'off'}): {method} has runs that never reached level {args.level:g}; no ratio")
+            print(f"{terrain}: {label} has runs that never reached level {args.level:g}; no ratio")
             continue
         bound = ">" if ref_censored else ""
-        print(f"{terrain} (early-end penalty {'on' if penalty else 'off'}): {args.reference} / {method} = {bound}{ref_median / median:.1f}x "
+        print(f"{terrain}: {args.reference} / {label} = {bound}{ref_median / median:.1f}x "
               f"(median env steps to level {args.level:g}: {args.reference} {bound}{ref_median:,.0f} over {len(ref)} run(s), "
-              f"{method} {median:,.0f} over {len(runs)} run(s))")
+              f"{label} {median:,.0f} over {len(runs)} run(s))")
 
 
 if __name__ == "__main__":
