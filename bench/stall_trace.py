@@ -1,0 +1,55 @@
+"""Where and how the open-loop CPG stalls: a trace of one episode (issue 5, slopes headroom).
+
+Plays the CPG (cpg_residual mode, a_r = 0) on one terrain level under the env's rules and prints,
+every `--every` control steps and at the end: base x [m] and z [m], pitch [deg], and which legs'
+tibias touch anything. Legs are named in the robot's joint order (RF, RM, RB, LB, LM, LF).
+
+    python bench/stall_trace.py --terrain slopes --level 20 --seed 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+import pybullet as p
+
+from hexbench.env import EnvConfig, HexapodEnv
+
+LEGS: tuple[str, ...] = ("RF", "RM", "RB", "LB", "LM", "LF")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--terrain", default="slopes", help="rough, slopes or stairs")
+    ap.add_argument("--level", type=float, default=20.0, help="level in the paper's units (cm, deg)")
+    ap.add_argument("--seed", type=int, default=3, help="episode seed")
+    ap.add_argument("--every", type=int, default=300, help="control steps between trace lines")
+    args = ap.parse_args()
+
+    env = HexapodEnv(EnvConfig(terrain=args.terrain, level=args.level, action_mode="cpg_residual"))
+    try:
+        env.reset(seed=args.seed)
+        sim = env.sim
+        foot_of_link = {link: leg for link, leg in zip(sim.foot_link_indices, LEGS)}
+        action = np.zeros(env.action_space.shape, dtype=np.float32)
+        print(f"{args.terrain} {args.level:g}, seed {args.seed}: step, x [m], z [m], pitch [deg], legs in contact")
+        step, done, info = 0, False, {}
+        while not done:
+            _, _, terminated, truncated, info = env.step(action)
+            step += 1
+            done = terminated or truncated
+            if step % args.every == 0 or done:
+                x, _, z = env.robot_state.base_pos_m
+                pitch_deg = math.degrees(float(env.robot_state.values[62]))
+                touching = {c[3] for c in p.getContactPoints(bodyA=sim.robot_id, physicsClientId=sim.client)}
+                legs = " ".join(leg for link, leg in foot_of_link.items() if link in touching)
+                print(f"{step:5d}  {x:6.3f}  {z:5.3f}  {pitch_deg:6.1f}  {legs}")
+        print(f"end: {info['end_reason']} after {step} steps, progress {info['progress_m']:.2f} m")
+    finally:
+        env.close()
+
+
+if __name__ == "__main__":
+    main()
