@@ -2,7 +2,7 @@
 
 Plays the CPG (cpg_residual mode, a_r = 0) on one terrain level under the env's rules and prints,
 every `--every` control steps and at the end: base x [m] and z [m], pitch [deg], and which legs'
-tibias touch anything. Legs are named in the robot's joint order (RF, RM, RB, LB, LM, LF).
+tibias touch anything (`Sim.foot_contacts`), named as in `hexbench.robot.LEG_NAMES`.
 
     python bench/stall_trace.py --terrain slopes --level 20 --seed 3
 """
@@ -13,11 +13,9 @@ import argparse
 import math
 
 import numpy as np
-import pybullet as p
 
 from hexbench.env import EnvConfig, HexapodEnv
-
-LEGS: tuple[str, ...] = ("RF", "RM", "RB", "LB", "LM", "LF")
+from hexbench.robot import LEG_NAMES
 
 
 def main() -> None:
@@ -31,8 +29,6 @@ def main() -> None:
     env = HexapodEnv(EnvConfig(terrain=args.terrain, level=args.level, action_mode="cpg_residual"))
     try:
         env.reset(seed=args.seed)
-        sim = env.sim
-        foot_of_link = {link: leg for link, leg in zip(sim.foot_link_indices, LEGS)}
         action = np.zeros(env.action_space.shape, dtype=np.float32)
         print(f"{args.terrain} {args.level:g}, seed {args.seed}: step, x [m], z [m], pitch [deg], legs in contact")
         step, done, info = 0, False, {}
@@ -41,10 +37,10 @@ def main() -> None:
             step += 1
             done = terminated or truncated
             if step % args.every == 0 or done:
-                x, _, z = env.robot_state.base_pos_m
-                pitch_deg = math.degrees(float(env.robot_state.values[62]))
-                touching = {c[3] for c in p.getContactPoints(bodyA=sim.robot_id, physicsClientId=sim.client)}
-                legs = " ".join(leg for link, leg in foot_of_link.items() if link in touching)
+                state = env.robot_state
+                x, _, z = state.base_pos_m
+                pitch_deg = math.degrees(float(state.base_rpy_rad[1]))
+                legs = " ".join(leg for leg, touching in zip(LEG_NAMES, env.sim.foot_contacts()) if touching)
                 print(f"{step:5d}  {x:6.3f}  {z:5.3f}  {pitch_deg:6.1f}  {legs}")
         print(f"end: {info['end_reason']} after {step} steps, progress {info['progress_m']:.2f} m")
     finally:
