@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from hexbench.robot import LEG_NAMES
+
 
 class EpisodeFileError(Exception):
     """An episode file is missing, unreadable or fails its CRC checks (one-line message)."""
@@ -106,9 +108,8 @@ def summary_text(path: str | Path) -> str:
         else:
             reward = np.array([r["reward"] for r in rows])
             lines.append(f"reward: total {reward.sum():.2f}, mean {reward.mean():.3f} per step")
-        legs = ("RF", "RM", "RB", "LB", "LM", "LF")
         lines.append("foot contact (fraction of logged steps): "
-                     + ", ".join(f"{leg} {v:.2f}" for leg, v in zip(legs, contacts.mean(axis=0))))
+                     + ", ".join(f"{leg} {v:.2f}" for leg, v in zip(LEG_NAMES, contacts.mean(axis=0))))
     lines.append("channels: " + ", ".join(f"{t} {n}" for t, n in sorted(log.message_counts.items())))
     lines.append(f"attachments: {', '.join(log.attachments) or 'none'}")
     return "\n".join(lines)
