@@ -57,11 +57,11 @@ def group_labels(runs: list[dict]) -> list[str]:
     configs: dict[tuple[str, str], list[dict]] = {}
     for run in runs:
         configs.setdefault((run["method"], run["terrain"]), []).append(run["config"])
+    differing = {key: sorted({k for c in group for k in c if any(c.get(k) != other.get(k) for other in group)})
+                 for key, group in configs.items()}
     labels = []
     for run in runs:
-        group = configs[(run["method"], run["terrain"])]
-        differing = sorted({k for c in group for k in c if any(c.get(k) != other.get(k) for other in group)})
-        tag = ",".join(f"{k}={run['config'].get(k)}" for k in differing)
+        tag = ",".join(f"{k}={run['config'].get(k)}" for k in differing[(run["method"], run["terrain"])])
         labels.append(f"{run['method']}{{{tag}}}" if tag else run["method"])
     return labels
 

@@ -140,9 +140,8 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
         raise CurvesError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
     loaded = [load_progress(Path(s), max_env_steps) for s in sources]
     fig, (ax_r, ax_s, ax_l) = plt.subplots(3, 1, figsize=(9, 10.5), sharex=True, height_ratios=(3, 2, 2))
-    methods = [run.get("method") if run else Path(source).stem.split("-")[0]
-               for source, (_agg, _label, run) in zip(sources, loaded)]
-    styles = line_styles([(method, run) for method, (_agg, _label, run) in zip(methods, loaded)])
+    styles = line_styles([(run.get("method") if run else Path(source).stem.split("-")[0], run)
+                          for source, (_agg, _label, run) in zip(sources, loaded)])
     for (agg, label, _run), style in zip(loaded, styles):
         style = {**style, "label": label}
         ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], **style)
