@@ -30,6 +30,12 @@ value-loss gradient norm was 2,556 against the policy loss's 5.7, so clipping sc
 gradient by 0.0002 and the policy barely learned (its std went 0.368 -> 0.345 in 830k steps). The
 normaliser's statistics are stored with every checkpoint in run.json (plain numbers, no pickle)
 and restored on resume. Episode rewards in progress.csv stay the raw Table 1 returns.
+
+`--init-from baselines/checkpoints/<method>-<terrain>.zip` starts a new PPO run from shipped
+weights (verified against their manifest before anything is written): the actor is taken over, the
+exploration std comes from the config and the value function starts fresh (the source run may
+have had another reward scale). run.json records the source file, sha256 and env steps, so a
+fine-tuned policy's total budget is the source's env steps plus the run's.
 """
 
 from __future__ import annotations
@@ -87,6 +93,7 @@ class TrainSettings:
     show_progress: bool = True
     fixed_level: float | None = None  # train at one level without the curriculum (epsilon sweep)
     device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
+    init_from: Path | None = None  # shipped weights (baselines/checkpoints/<method>-<terrain>.zip) to start from
 
     @property
     def method(self) -> str:
@@ -218,6 +225,53 @@ def set_initial_action(model, initial_action) -> None:
 
     with torch.no_grad():
         model.policy.action_net.bias.copy_(torch.as_tensor(initial_action, dtype=torch.float32))
+
+
+# Weights a warm start (`--init-from`) does not take over: the exploration std comes from the config
+# (the point of fine-tuning at another std), and the value function is learned afresh because the
+# source run's returns may have had another scale (it may have trained without reward normalisation).
+FRESH_ON_INIT_PREFIXES: tuple[str, ...] = ("log_std", "value_net.", "mlp_extractor.value_net.")
+
+
+def read_init_weights(path: Path, config) -> tuple[dict, dict]:
+    """(weights to load, what they are) for a warm start from a shipped checkpoint, checked to fit config's network.
+
+    The file must sit beside a manifest.json that lists it (it is hashed against that entry before
+    anything is read, as for every shipped checkpoint). Only PPO: a shipped SAC/TD3 file holds the
+    actor alone, and a critic learned from nothing would undo it before it could help.
+    """
+    from hexbench.policy import MANIFEST_NAME, build_policy, load_policy_weights, read_manifest
+
+    path = Path(path)
+    if config.algo != "ppo":
+        raise TrainError(f"--init-from works for PPO baselines only (this config's algo is {config.algo!r})")
+    try:
+        manifest = read_manifest(path.parent)
+    except CheckpointError as e:
+        raise TrainError(f"--init-from {path}: {e}") from None
+    entries = {e.get("file"): (key, e) for key, e in manifest["checkpoints"].items()}
+    if path.name not in entries:
+        raise TrainError(f"--init-from {path}: not listed in {path.parent / MANIFEST_NAME}; "
+                         f"listed: {', '.join(sorted(f for f in entries if f))}")
+    key, entry = entries[path.name]
+    try:
+        state = load_policy_weights(path, entry["sha256"])
+    except CheckpointError as e:
+        raise TrainError(str(e)) from None
+    kept = {k: v for k, v in state.items() if not k.startswith(FRESH_ON_INIT_PREFIXES)}
+    try:
+        result = build_policy(config).load_state_dict(kept, strict=False)
+    except RuntimeError as e:
+        first = str(e).splitlines()[0]
+        raise TrainError(f"--init-from {path}: weights do not fit this config's network ({first})") from None
+    missing = [k for k in result.missing_keys if not k.startswith(FRESH_ON_INIT_PREFIXES)]
+    if missing or result.unexpected_keys:
+        what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
+        raise TrainError(f"--init-from {path}: weights do not fit this config's network ({what})")
+    info = {"file": str(path), "manifest_key": key, "sha256": entry["sha256"],
+            "source_env_steps": entry.get("env_steps"), "source_command": entry.get("command"),
+            "fresh": list(FRESH_ON_INIT_PREFIXES)}
+    return kept, info
 
 
 # --------------------------------------------------------------------------- run directory
@@ -401,11 +455,17 @@ def train(settings: TrainSettings) -> dict:
         recorded = {**previous, "config": {**{k: v for k, v in cfg_dict.items() if not v}, **previous.get("config", {})}}
         for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
                          ("workers", settings.workers), ("config", cfg_dict),
-                         ("fixed_level", settings.fixed_level)):
+                         ("fixed_level", settings.fixed_level),
+                         ("init_from", str(settings.init_from) if settings.init_from else None)):
             was = recorded.get(key)
+            if key == "init_from" and isinstance(was, dict):
+                was = was["file"]
             if was != now:
                 raise TrainError(f"{run_dir}: holds a run with {key}={was!r}, not {now!r}; "
                                  f"choose another --out or move it away")
+    init_weights = None
+    if settings.init_from is not None and previous is None:  # read (and verify) before any file is written
+        init_weights = read_init_weights(settings.init_from, config)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "checkpoints").mkdir(exist_ok=True)
     run = previous or {
@@ -414,6 +474,7 @@ def train(settings: TrainSettings) -> dict:
         "seed": settings.seed, "workers": settings.workers, "config": cfg_dict, "fixed_level": settings.fixed_level,
         "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "hexbench_commit": git_commit(),
         "wall_time_s": 0.0, "env_steps": 0, "checkpoints": [], "curriculum": None, "sessions": [],
+        "init_from": init_weights[1] if init_weights else None,
     }
     run["total_steps"] = settings.total_steps
     run["command"] = settings.command
@@ -448,6 +509,8 @@ def train(settings: TrainSettings) -> dict:
                     policy_kwargs=policy_kwargs(config), **sb3_kwargs(config), **extra)
         if getattr(config, "initial_action", None) is not None:
             set_initial_action(model, config.initial_action)
+        if init_weights is not None:
+            model.policy.load_state_dict(init_weights[0], strict=False)  # fit checked by read_init_weights
 
     def save_checkpoint(model, env_steps: int, wall_time_s: float, curriculum: list[dict], summary: dict,
                         episodes: list[int]) -> None:
@@ -524,7 +587,9 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
 
     Writes <dest_dir>/<method>-<terrain>.zip (policy state_dict only, no pickled data) and its entry
     in <dest_dir>/manifest.json: sha256, command, env-step budget and steps reached, seed, wall
-    time, hexbench commit, metrics at that checkpoint and whether the run was complete.
+    time, hexbench commit, metrics at that checkpoint and whether the run was complete. A run
+    warm-started with --init-from counts its source's env steps in env_steps and the budget, and
+    keeps the source (file, sha256, command) under init_from.
     """
     from hexbench.policy import MANIFEST_NAME, acting_weights, load_policy_weights, save_policy_weights
 
@@ -574,6 +639,15 @@ def publish_checkpoint(run_dir: Path, dest_dir: Path, which: str = "best") -> di
                                                              "curriculum_level_mean", "curriculum_level_max")},
         "published_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
+    source = run.get("init_from")
+    if source:  # a warm-started run: count the source's training too, and say where it came from
+        entry = manifest["checkpoints"][key]
+        before = int(source.get("source_env_steps") or 0)
+        entry["init_from"] = source
+        entry["run_env_steps"] = chosen["env_steps"]
+        entry["env_steps"] = before + chosen["env_steps"]
+        entry["env_step_budget"] = before + run["total_steps"]
+        entry["status"] += f"; warm-started from {source['manifest_key']} at {before} env steps ({entry['env_steps']} in all)"
     from hexbench.selection import selection_summary
 
     selection = selection_summary(run_dir, chosen["sha256"])

@@ -228,6 +228,66 @@ def test_corrupt_missing_or_unlisted_shipped_checkpoint_is_refused(tmp_path):
         make_policy_controller(config, dest, "ppo_cpg", task("rough", 3.0))
 
 
+def test_init_from_shipped_weights_starts_from_that_policy(tmp_path):
+    """A warm-started run acts like the shipped policy before it learns (learning rate 0), with the
+    config's own exploration std; the source is recorded in run.json."""
+    from hexbench.env import HexapodEnv
+    from hexbench.policy import algo_class
+
+    shipped = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
+    out = tmp_path / "warm"
+    result = train_tiny("ppo_cpg", out, extra=("--set", "learning_rate=0.0", "--set", "log_std_init=-3.0",
+                                               "--init-from", shipped))
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["init_from"]["manifest_key"] == "ppo_cpg-rough" and run["init_from"]["source_env_steps"] > 0
+    config = load_baseline("ppo_cpg").CONFIG
+    ctrl = make_policy_controller(config, shipped.parent, "ppo_cpg", task("rough", 9.0))
+    env = HexapodEnv(task("rough", 9.0).env_config(config.action_mode))
+    obs, _ = env.reset(seed=5)
+    ctrl.reset(5)
+    model = algo_class("ppo").load(out / run["checkpoints"][-1]["file"], device="cpu")
+    for _ in range(20):
+        action = ctrl.act(obs)
+        warm, _ = model.predict(scale_observation(obs), deterministic=True)
+        np.testing.assert_allclose(np.clip(warm, -1, 1), action, atol=1e-6)
+        obs, *_ = env.step(action)
+    env.close()
+    assert float(model.policy.log_std.detach().exp().mean()) == pytest.approx(np.exp(-3.0), rel=1e-5)
+    dest = tmp_path / "published"
+    assert run_cli("checkpoints", "publish", out, "--dest", dest, "--checkpoint", "last").exit_code == 0
+    entry = json.loads((dest / "manifest.json").read_text())["checkpoints"]["ppo_cpg-rough"]
+    source = run["init_from"]["source_env_steps"]
+    assert entry["env_steps"] == source + run["env_steps"] and entry["run_env_steps"] == run["env_steps"]
+    assert entry["init_from"]["sha256"] == run["init_from"]["sha256"]
+
+
+@pytest.mark.parametrize("bad, message", [
+    ("unlisted", "not listed in"),
+    ("tampered", "corrupt or tampered"),
+    ("off_policy", "PPO baselines only"),
+])
+def test_bad_init_from_is_one_line_and_writes_no_run(tmp_path, bad, message):
+    shipped = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
+    folder = tmp_path / "checkpoints"
+    folder.mkdir()
+    (folder / "manifest.json").write_bytes((shipped.parent / "manifest.json").read_bytes())
+    source, method = folder / "ppo_cpg-rough.zip", "ppo_cpg"
+    data = bytearray(shipped.read_bytes())
+    if bad == "unlisted":
+        source = folder / "mine.zip"
+    elif bad == "tampered":
+        data[len(data) // 2] ^= 0xFF
+    else:
+        method = "sac_cpg"
+    source.write_bytes(bytes(data))
+    out = tmp_path / "run"
+    result = train_tiny(method, out, extra=("--init-from", source))
+    assert result.exit_code == 2
+    assert message in result.output and len(result.output.strip().splitlines()) == 1, result.output
+    assert not out.exists()
+
+
 def test_epsilon_sweep_and_learning_curves(tmp_path):
     sweep_dir = tmp_path / "sweep"
     result = run_cli("sweep", "epsilon", "--terrain", "stairs", "--values", "0.2,0.6", "--steps", 64,
