@@ -91,7 +91,7 @@ class TrainSettings:
     overrides: tuple[tuple[str, object], ...] = ()  # config field overrides (name, value)
     command: str = ""
     show_progress: bool = True
-    fixed_level: float | None = None  # train at one level without the curriculum (epsilon sweep)
+    fixed_level: float | None = None  # train at one suite level without the curriculum (--level; epsilon sweep)
     device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
     init_from: Path | None = None  # shipped weights (baselines/checkpoints/<method>-<terrain>.zip) to start from
 
@@ -445,6 +445,13 @@ def train(settings: TrainSettings) -> dict:
         raise TrainError(f"unknown --device {settings.device!r}; valid: {', '.join(TRAIN_DEVICES)}")
     if settings.device == "cuda" and not torch.cuda.is_available():
         raise TrainError("--device cuda: this torch sees no CUDA GPU (torch.cuda.is_available() is False); use --device cpu")
+    if settings.fixed_level is not None:
+        from hexbench.tasks import load_suite
+
+        try:
+            load_suite().task(settings.terrain, settings.fixed_level)
+        except ValueError as e:
+            raise TrainError(f"--level: {e}") from None
     config = load_baseline_config(Path(settings.baseline_path), settings.overrides)
     run_dir = settings.run_dir
     previous = read_run(run_dir)

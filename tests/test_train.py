@@ -262,6 +262,18 @@ def test_init_from_shipped_weights_starts_from_that_policy(tmp_path):
     assert entry["init_from"]["sha256"] == run["init_from"]["sha256"]
 
 
+def test_fixed_level_trains_there_and_an_unknown_level_is_refused(tmp_path):
+    out = tmp_path / "fixed"
+    result = train_tiny("ppo_cpg", out, terrain="slopes", extra=("--level", "20"))
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["fixed_level"] == 20.0 and run["curriculum"][0]["level"] == 20.0
+    bad = tmp_path / "bad"
+    result = train_tiny("ppo_cpg", bad, terrain="slopes", extra=("--level", "19"))
+    assert result.exit_code == 2 and "valid levels" in result.output and not bad.exists()
+    assert len(result.output.strip().splitlines()) == 1, result.output
+
+
 @pytest.mark.parametrize("bad, message", [
     ("unlisted", "not listed in"),
     ("tampered", "corrupt or tampered"),

@@ -23,6 +23,7 @@ def register(app: typer.Typer) -> None:
         override: list[str] = typer.Option([], "--set", help="override a CONFIG field, NAME=VALUE (repeatable)"),
         progress: bool = typer.Option(True, "--progress/--no-progress", help="show the progress bar"),
         device: str = typer.Option("cpu", "--device", help="torch device of the learner: cpu or cuda (SAC/TD3 gain most)"),
+        level: float = typer.Option(None, "--level", help="train at this one level of the task suite, without the curriculum"),
         init_from: Path = typer.Option(None, "--init-from", help="start a new PPO run from shipped weights, e.g. baselines/checkpoints/ppo_cpg-rough.zip (std and value head from scratch)"),
     ) -> None:
         """Train a baseline (PPO/SAC/TD3 per its CONFIG) on the paper's curriculum; resumes a run."""
@@ -37,7 +38,7 @@ def register(app: typer.Typer) -> None:
                 checkpoint_every_s=checkpoint_every_s, csv_every_s=csv_every_s,
                 overrides=tuple(parse_override(o) for o in override),
                 command="hexbench " + shlex.join(sys.argv[1:]), show_progress=progress, device=device,
-                init_from=init_from,
+                init_from=init_from, fixed_level=level,
             )
             run = train(settings)
         except TrainError as e:
