@@ -29,6 +29,8 @@ class Config:
     n_steps: int = 2048  # rollout length per env (SB3 default)
     n_epochs: int = 10  # SB3 default
     ent_coef: float = 0.0
+    use_sde: bool = False  # SB3 default: Gaussian noise drawn anew every step (True: gSDE, docs/training.md)
+    sde_sample_freq: int = -1  # SB3 default; with use_sde, steps between new exploration matrices
     log_std_init: float = -2.3  # not in the paper: std 0.10; at 0.37 (-1.0) the deterministic policy decayed (docs/training.md)
     early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
     normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.train)

@@ -143,7 +143,9 @@ def build_policy(config):
     act_space = gym.spaces.Box(-1.0, 1.0, (action_dim(config.action_mode),), dtype=np.float32)
     cls = algo_class(config.algo)
     policy_cls = cls.policy_aliases["MlpPolicy"]
-    return policy_cls(obs_space, act_space, lambda _progress: 0.0, **policy_kwargs(config))
+    # gSDE (a PPO constructor argument, which SB3 hands to its policy) changes the shape of log_std
+    sde = {"use_sde": True} if getattr(config, "use_sde", False) else {}
+    return policy_cls(obs_space, act_space, lambda _progress: 0.0, **policy_kwargs(config), **sde)
 
 
 # ----------------------------------------------------------------------------- checkpoints
@@ -209,6 +211,10 @@ def save_policy_weights(policy_state: dict, path: Path) -> str:
 ACTING_PREFIXES: dict[str, tuple[str, ...]] = {"ppo": ("",), "sac": ("actor.",), "td3": ("actor.",)}
 
 
+# Policy entries that only exploration uses (SB3 PPO's Gaussian log std).
+EXPLORATION_KEYS: frozenset[str] = frozenset({"log_std"})
+
+
 def acting_weights(algo: str, policy_state: dict) -> dict:
     """The entries of a policy state_dict that acting needs (what ships in baselines/checkpoints/)."""
     return {k: v for k, v in policy_state.items() if k.startswith(ACTING_PREFIXES[algo])}
@@ -217,13 +223,16 @@ def acting_weights(algo: str, policy_state: dict) -> dict:
 def load_policy(config, path: Path, expected_sha256: str):
     """A policy of the config's network with the verified weights of `path` (full or acting-only)."""
     policy = build_policy(config)
-    state = load_policy_weights(path, expected_sha256)
+    # PPO's log_std is exploration only: the deterministic policy never reads it, and its shape
+    # depends on how it explored (a vector, or a matrix under gSDE), so it is not loaded
+    state = {k: v for k, v in load_policy_weights(path, expected_sha256).items() if k not in EXPLORATION_KEYS}
     try:
         result = policy.load_state_dict(state, strict=False)
     except RuntimeError as e:
         first = str(e).splitlines()[0]
         raise CheckpointError(f"{path}: weights do not fit the config's network ({first})") from None
-    missing = [k for k in result.missing_keys if k.startswith(ACTING_PREFIXES[config.algo])]
+    missing = [k for k in result.missing_keys
+               if k.startswith(ACTING_PREFIXES[config.algo]) and k not in EXPLORATION_KEYS]
     if missing or result.unexpected_keys:
         what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
         raise CheckpointError(f"{path}: weights do not fit the config's network ({what}; "

@@ -262,6 +262,29 @@ def test_init_from_shipped_weights_starts_from_that_policy(tmp_path):
     assert entry["init_from"]["sha256"] == run["init_from"]["sha256"]
 
 
+def test_gsde_trained_weights_act_under_the_plain_config(tmp_path):
+    """gSDE changes only how PPO explores (log_std becomes a matrix): its published weights load
+    into the baseline's plain config and act as the trained model's deterministic policy."""
+    from hexbench.env import HexapodEnv
+    from hexbench.policy import algo_class
+
+    out, dest = tmp_path / "sde", tmp_path / "checkpoints"
+    result = train_tiny("ppo_cpg", out, extra=("--set", "use_sde=True", "--set", "sde_sample_freq=8"))
+    assert result.exit_code == 0, result.output
+    assert run_cli("checkpoints", "publish", out, "--dest", dest).exit_code == 0
+    config = load_baseline("ppo_cpg").CONFIG
+    assert not config.use_sde
+    ctrl = make_policy_controller(config, dest, "ppo_cpg", task("rough", 5.0))
+    env = HexapodEnv(task("rough", 5.0).env_config(config.action_mode))
+    obs, _ = env.reset(seed=2)
+    ctrl.reset(2)
+    run = json.loads((out / "run.json").read_text())
+    model = algo_class("ppo").load(out / run["checkpoints"][-1]["file"], device="cpu")
+    expected, _ = model.predict(scale_observation(obs), deterministic=True)
+    np.testing.assert_allclose(ctrl.act(obs), np.clip(expected, -1, 1), atol=1e-6)
+    env.close()
+
+
 def test_fixed_level_trains_there_and_an_unknown_level_is_refused(tmp_path):
     out = tmp_path / "fixed"
     result = train_tiny("ppo_cpg", out, terrain="slopes", extra=("--level", "20"))
