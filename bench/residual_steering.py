@@ -1,0 +1,88 @@
+"""How a residual can steer the CPG's tripod gait (issue 5: why PPO-CPG leaves the rough corridor).
+
+Every rough-terrain failure of the shipped PPO-CPG is a lateral deviation, so the residual a_r
+has not learned to steer. This plays simple hand-made residuals on flat ground (no observation
+noise, 900 control steps = 15 s) and prints the yaw turned, the forward progress and the lateral
+offset at the end:
+
+  * bias: a constant a_r on the hip joints (the same offset at every phase of the gait);
+  * amplitude: a_r_hip = g * q_hip / eps on one side, q_hip the *observed* hip angle, i.e. that
+    side's hip swing scaled by (1 + g): a residual that follows the gait's phase.
+
+A steering residual of the second kind is a product of a heading signal and the gait phase: an
+exploration noise that is white at 60 Hz (SB3's default Gaussian policy) averages it out over a
+2 s gait cycle, while state-dependent noise held for a cycle or more (gSDE) produces it.
+
+    python bench/residual_steering.py [--steps 900] [--seed 1]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+import numpy as np
+
+from hexbench.env import NO_NOISE, EnvConfig, HexapodEnv
+from hexbench.robot import LEG_NAMES
+
+HIP_INDEX: dict[str, int] = {leg: 3 * i for i, leg in enumerate(LEG_NAMES)}  # joints are (hip, knee, ankle) per leg
+RIGHT_HIPS = [HIP_INDEX[leg] for leg in LEG_NAMES if leg.startswith("R")]
+LEFT_HIPS = [HIP_INDEX[leg] for leg in LEG_NAMES if leg.startswith("L")]
+
+
+def play(residual, steps: int, seed: int) -> tuple[float, float, float]:
+    """(yaw turned [deg], forward progress [m], lateral offset [m]); residual(obs, eps) -> a_r."""
+    env = HexapodEnv(EnvConfig(terrain="flat", noise=NO_NOISE))
+    try:
+        obs, _ = env.reset(seed=seed)
+        yaw0 = float(env.robot_state.base_rpy_rad[2])
+        info = {"progress_m": 0.0, "lateral_m": 0.0}
+        for _ in range(steps):
+            action = np.clip(residual(obs, env.config.eps), -1.0, 1.0)
+            obs, _, terminated, truncated, info = env.step(action)
+            if terminated or truncated:
+                break
+        yaw = float(env.robot_state.base_rpy_rad[2])
+        return math.degrees(yaw - yaw0), float(info["progress_m"]), float(info["lateral_m"])
+    finally:
+        env.close()
+
+
+def bias(value: float, hips: list[int]):
+    def residual(obs, eps):
+        a = np.zeros(18)
+        a[hips] = value
+        return a
+    return residual
+
+
+def amplitude(gain_right: float, gain_left: float):
+    def residual(obs, eps):
+        a = np.zeros(18)
+        a[RIGHT_HIPS] = gain_right * obs[RIGHT_HIPS] / eps
+        a[LEFT_HIPS] = gain_left * obs[LEFT_HIPS] / eps
+        return a
+    return residual
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--steps", type=int, default=900, help="control steps per episode (60 Hz)")
+    parser.add_argument("--seed", type=int, default=1)
+    args = parser.parse_args(argv)
+    cases = [("none (open-loop CPG)", bias(0.0, RIGHT_HIPS))]
+    for v in (0.3, -0.3):
+        cases += [(f"bias a_r={v:+} on all hips", bias(v, RIGHT_HIPS + LEFT_HIPS)),
+                  (f"bias a_r={v:+} on right hips", bias(v, RIGHT_HIPS))]
+    for g in (0.1, 0.3, -0.3):
+        cases.append((f"amplitude right hips x{1 + g:.1f}", amplitude(g, 0.0)))
+    print(f"{'residual':32s} {'yaw [deg]':>10s} {'progress [m]':>13s} {'lateral [m]':>12s}")
+    for name, residual in cases:
+        yaw, progress, lateral = play(residual, args.steps, args.seed)
+        print(f"{name:32s} {yaw:10.1f} {progress:13.2f} {lateral:12.2f}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
