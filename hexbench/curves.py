@@ -69,8 +69,13 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
         label = source.resolve().name if source.is_dir() else source.stem
         cfg = run.get("config") or {}
         if cfg.get("log_std_init") is not None:
-            label += f" (std {math.exp(cfg['log_std_init']):.2f}"
+            std = math.exp(cfg["log_std_init"])
+            # under gSDE the std is that of the exploration matrix's entries, held for sde_sample_freq steps
+            label += (f" (gSDE, matrix std {std:.2f}, new every {cfg.get('sde_sample_freq')} steps" if cfg.get("use_sde")
+                      else f" (std {std:.2f}")
             label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
+        if run.get("init_from"):
+            label += f", from {run['init_from']['manifest_key']} at {run['init_from']['source_env_steps']:,}"
         if not cfg.get("early_end_penalty", False):
             label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
         total = run.get("total_steps", 0)
