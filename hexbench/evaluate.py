@@ -252,9 +252,37 @@ def git_commit() -> str:
     return "unknown"
 
 
+# Packages whose arithmetic an episode's outcome depends on. The physics reproduces bit for bit on
+# another x86 machine, a policy's float32 forward pass need not (docs/training.md, session 11).
+OUTCOME_PACKAGES: tuple[str, ...] = ("numpy", "pybullet", "torch")
+
+
+def cpu_model() -> str:
+    """The processor's model name (/proc/cpuinfo on Linux), else what `platform` knows."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def package_versions(names: tuple[str, ...] = OUTCOME_PACKAGES) -> dict[str, str | None]:
+    from importlib.metadata import PackageNotFoundError, version
+
+    out: dict[str, str | None] = {}
+    for name in names:
+        try:
+            out[name] = version(name)
+        except PackageNotFoundError:
+            out[name] = None
+    return out
+
+
 def machine_info() -> dict:
     return {"hostname": socket.gethostname(), "platform": platform.platform(), "python": platform.python_version(),
-            "cpu_count": os.cpu_count()}
+            "cpu_count": os.cpu_count(), "cpu_model": cpu_model(), "packages": package_versions()}
 
 
 def validate_record(record: dict) -> None:
