@@ -61,7 +61,10 @@ def group_labels(runs: list[dict]) -> list[str]:
                  for key, group in configs.items()}
     labels = []
     for run in runs:
-        tag = ",".join(f"{k}={run['config'].get(k)}" for k in differing[(run["method"], run["terrain"])])
+        # a field a run's config lacks (added to the baseline file after that run) is left out of its
+        # label, so older runs keep the labels the docs quote
+        tag = ",".join(f"{k}={run['config'][k]}" for k in differing[(run["method"], run["terrain"])]
+                       if k in run["config"])
         labels.append(f"{run['method']}{{{tag}}}" if tag else run["method"])
     return labels
 
