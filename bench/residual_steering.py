@@ -24,11 +24,10 @@ import math
 import numpy as np
 
 from hexbench.env import NO_NOISE, EnvConfig, HexapodEnv
-from hexbench.robot import LEG_NAMES
+from hexbench.robot import JOINT_NAMES, LEG_NAMES
 
-HIP_INDEX: dict[str, int] = {leg: 3 * i for i, leg in enumerate(LEG_NAMES)}  # joints are (hip, knee, ankle) per leg
-RIGHT_HIPS = [HIP_INDEX[leg] for leg in LEG_NAMES if leg.startswith("R")]
-LEFT_HIPS = [HIP_INDEX[leg] for leg in LEG_NAMES if leg.startswith("L")]
+RIGHT_HIPS = [JOINT_NAMES.index(f"{leg}_hip") for leg in LEG_NAMES if leg.startswith("R")]
+LEFT_HIPS = [JOINT_NAMES.index(f"{leg}_hip") for leg in LEG_NAMES if leg.startswith("L")]
 
 
 def play(residual, steps: int, seed: int) -> tuple[float, float, float]:

@@ -220,23 +220,29 @@ def acting_weights(algo: str, policy_state: dict) -> dict:
     return {k: v for k, v in policy_state.items() if k.startswith(ACTING_PREFIXES[algo])}
 
 
+def fit_weights(policy, state: dict, path: Path, needed) -> None:
+    """Load `state` into `policy` (non-strict); CheckpointError unless every key with needed(key)
+    is there and nothing is left over (a network of another shape)."""
+    try:
+        result = policy.load_state_dict(state, strict=False)
+    except RuntimeError as e:
+        first = str(e).splitlines()[0]
+        raise CheckpointError(f"{path}: weights do not fit the config's network ({first})") from None
+    missing = [k for k in result.missing_keys if needed(k)]
+    if missing or result.unexpected_keys:
+        what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
+        raise CheckpointError(f"{path}: weights do not fit the config's network ({what}; "
+                              f"{len(missing)} missing, {len(result.unexpected_keys)} unexpected)")
+
+
 def load_policy(config, path: Path, expected_sha256: str):
     """A policy of the config's network with the verified weights of `path` (full or acting-only)."""
     policy = build_policy(config)
     # PPO's log_std is exploration only: the deterministic policy never reads it, and its shape
     # depends on how it explored (a vector, or a matrix under gSDE), so it is not loaded
     state = {k: v for k, v in load_policy_weights(path, expected_sha256).items() if k not in EXPLORATION_KEYS}
-    try:
-        result = policy.load_state_dict(state, strict=False)
-    except RuntimeError as e:
-        first = str(e).splitlines()[0]
-        raise CheckpointError(f"{path}: weights do not fit the config's network ({first})") from None
-    missing = [k for k in result.missing_keys
-               if k.startswith(ACTING_PREFIXES[config.algo]) and k not in EXPLORATION_KEYS]
-    if missing or result.unexpected_keys:
-        what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
-        raise CheckpointError(f"{path}: weights do not fit the config's network ({what}; "
-                              f"{len(missing)} missing, {len(result.unexpected_keys)} unexpected)")
+    fit_weights(policy, state, path,
+                needed=lambda k: k.startswith(ACTING_PREFIXES[config.algo]) and k not in EXPLORATION_KEYS)
     policy.set_training_mode(False)
     return policy
 

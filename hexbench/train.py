@@ -240,7 +240,7 @@ def read_init_weights(path: Path, config) -> tuple[dict, dict]:
     anything is read, as for every shipped checkpoint). Only PPO: a shipped SAC/TD3 file holds the
     actor alone, and a critic learned from nothing would undo it before it could help.
     """
-    from hexbench.policy import MANIFEST_NAME, build_policy, load_policy_weights, read_manifest
+    from hexbench.policy import MANIFEST_NAME, build_policy, fit_weights, load_policy_weights, read_manifest
 
     path = Path(path)
     if config.algo != "ppo":
@@ -260,14 +260,9 @@ def read_init_weights(path: Path, config) -> tuple[dict, dict]:
         raise TrainError(str(e)) from None
     kept = {k: v for k, v in state.items() if not k.startswith(FRESH_ON_INIT_PREFIXES)}
     try:
-        result = build_policy(config).load_state_dict(kept, strict=False)
-    except RuntimeError as e:
-        first = str(e).splitlines()[0]
-        raise TrainError(f"--init-from {path}: weights do not fit this config's network ({first})") from None
-    missing = [k for k in result.missing_keys if not k.startswith(FRESH_ON_INIT_PREFIXES)]
-    if missing or result.unexpected_keys:
-        what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
-        raise TrainError(f"--init-from {path}: weights do not fit this config's network ({what})")
+        fit_weights(build_policy(config), kept, path, needed=lambda k: not k.startswith(FRESH_ON_INIT_PREFIXES))
+    except CheckpointError as e:
+        raise TrainError(f"--init-from {e}") from None
     info = {"file": str(path), "manifest_key": key, "sha256": entry["sha256"],
             "source_env_steps": entry.get("env_steps"), "source_command": entry.get("command"),
             "fresh": list(FRESH_ON_INIT_PREFIXES)}
@@ -459,14 +454,13 @@ def train(settings: TrainSettings) -> dict:
     if previous is not None:
         # a config field added after the run started is absent from its run.json: it resumes only with
         # that field off (False / None), which is how the run was trained
-        recorded = {**previous, "config": {**{k: v for k, v in cfg_dict.items() if not v}, **previous.get("config", {})}}
+        recorded = {**previous, "config": {**{k: v for k, v in cfg_dict.items() if not v}, **previous.get("config", {})},
+                    "init_from": (previous.get("init_from") or {}).get("file")}  # compared by source file
         for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
                          ("workers", settings.workers), ("config", cfg_dict),
                          ("fixed_level", settings.fixed_level),
                          ("init_from", str(settings.init_from) if settings.init_from else None)):
             was = recorded.get(key)
-            if key == "init_from" and isinstance(was, dict):
-                was = was["file"]
             if was != now:
                 raise TrainError(f"{run_dir}: holds a run with {key}={was!r}, not {now!r}; "
                                  f"choose another --out or move it away")
