@@ -3,7 +3,8 @@
 `hexbench checkpoints select` ranks the checkpoints of one run. To choose between the best of two
 runs, this plays each named checkpoint on the same held-out seeds (hexbench.selection's `heldout`
 namespace, never a protocol seed) at the levels given, under the protocol's rules, and prints
-successes per level. Nothing is written to the runs' selection.json.
+successes per level, and forward progress (mean and max over all its episodes), which tells
+checkpoints apart where none arrives. Nothing is written to the runs' selection.json.
 
     python bench/compare_checkpoints.py training/ppo_cpg-rough-seed0-v2:180502 \\
         training/ppo_cpg-rough-seed0-v4:218704 --levels 5 7 9 11 --episodes 20 --workers 2
@@ -16,6 +17,8 @@ import json
 from collections import Counter, defaultdict
 from multiprocessing import get_context
 from pathlib import Path
+
+import numpy as np
 
 from hexbench.selection import heldout_seeds, score_job
 from hexbench.train import TrainError, checkpoint_at, read_run
@@ -53,15 +56,18 @@ def main() -> None:
     names = {c["sha256"]: f"{d}:{c['env_steps']}" for _, d, c in candidates}
     wins: dict[str, dict[float, int]] = defaultdict(lambda: defaultdict(int))
     ends: dict[str, Counter] = defaultdict(Counter)
+    progress_m: dict[str, list[float]] = defaultdict(list)
     for sha, level, _seed, out in outcomes:
         if "error" in out:
             raise SystemExit(f"error: {out['error']}")
         wins[sha][level] += out["success"]
         ends[sha][out["end_reason"]] += 1
+        progress_m[sha].append(out["progress_m"])
     for sha, name in names.items():
         per_level = "  ".join(f"{lv:g}: {wins[sha][lv]}/{args.episodes}" for lv in args.levels)
         total = sum(wins[sha].values())
-        print(f"{name:50s} {per_level}   total {total}/{args.episodes * len(args.levels)}   {dict(ends[sha])}")
+        print(f"{name:50s} {per_level}   total {total}/{args.episodes * len(args.levels)}   "
+              f"progress mean {np.mean(progress_m[sha]):.2f} m, max {max(progress_m[sha]):.2f} m   {dict(ends[sha])}")
     if args.json:
         args.json.write_text(json.dumps([{"checkpoint": names[sha], "level": lv, "seed": seed, **out}
                                          for sha, lv, seed, out in outcomes], indent=1))

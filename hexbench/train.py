@@ -36,6 +36,11 @@ weights (verified against their manifest before anything is written): the actor 
 exploration std comes from the config and the value function starts fresh (the source run may
 have had another reward scale). run.json records the source file, sha256 and env steps, so a
 fine-tuned policy's total budget is the source's env steps plus the run's.
+
+`--curriculum START:STEP:TOP` replaces the paper's curriculum of the terrain with another one
+(same rule: level up after 20 arrivals; levels in the paper's units), e.g. slopes 18:0.5:21 to
+fine-tune beyond the paper's 18-deg top; run.json records it as `curriculum_levels`. `--level L`
+trains at one suite level instead; the two exclude each other.
 """
 
 from __future__ import annotations
@@ -50,7 +55,7 @@ import subprocess
 import sys
 import time
 from collections import deque
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 from datetime import datetime, timezone
 from functools import partial
 from pathlib import Path
@@ -58,7 +63,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from hexbench.env import OBS_HIGH, HexapodEnv
+from hexbench.env import OBS_HIGH, Curriculum, HexapodEnv
 from hexbench.policy import (
     OBS_SCALE, CheckpointError, ConfigError, action_noise, algo_class, config_dict, policy_kwargs, sb3_kwargs, sha256_file,
     validate_config,
@@ -94,6 +99,7 @@ class TrainSettings:
     fixed_level: float | None = None  # train at one suite level without the curriculum (--level; epsilon sweep)
     device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
     init_from: Path | None = None  # shipped weights (baselines/checkpoints/<method>-<terrain>.zip) to start from
+    curriculum: Curriculum | None = None  # replaces the paper's curriculum for the terrain (--curriculum)
 
     @property
     def method(self) -> str:
@@ -102,6 +108,19 @@ class TrainSettings:
     @property
     def run_dir(self) -> Path:
         return Path(self.out_dir) if self.out_dir else Path("training") / f"{self.method}-{self.terrain}-seed{self.seed}"
+
+
+def parse_curriculum(text: str) -> Curriculum:
+    """'18:0.5:21' -> Curriculum(18.0, 0.5, 21.0): start level, level step, top level, in the paper's units."""
+    parts = text.split(":")
+    try:
+        start, step, top = (float(p) for p in parts)
+    except ValueError:
+        raise TrainError(f"--curriculum {text!r} is not START:STEP:TOP (three numbers in the terrain's unit, "
+                         f"e.g. 18:0.5:21)") from None
+    if not (step > 0 and start <= top and start >= 0 and all(math.isfinite(v) for v in (start, step, top))):
+        raise TrainError(f"--curriculum {text!r}: needs 0 <= START <= TOP and STEP > 0")
+    return Curriculum(start, step, top)
 
 
 def parse_override(text: str) -> tuple[str, object]:
@@ -164,8 +183,10 @@ class TrainingWrapper(gym.ObservationWrapper):
 
 
 def make_training_env(terrain: str, action_mode: str, residual_scale: float | None,
-                      fixed_level: float | None = None, early_end_penalty: bool = False) -> gym.Env:
-    """The curriculum env of paper 4.1 (or, with fixed_level, that level alone), noise on, monitored."""
+                      fixed_level: float | None = None, early_end_penalty: bool = False,
+                      curriculum: Curriculum | None = None) -> gym.Env:
+    """The curriculum env of paper 4.1 (or another curriculum, or with fixed_level that level alone),
+    noise on, monitored."""
     from stable_baselines3.common.monitor import Monitor
 
     from hexbench.env import EnvConfig
@@ -174,6 +195,8 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
     if fixed_level is None:
         config = curriculum_config(terrain, action_mode, residual_scale=residual_scale,
                                    early_end_penalty=early_end_penalty)
+        if curriculum is not None:
+            config = replace(config, curriculum=curriculum)
     else:
         config = EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode, residual_scale=residual_scale,
                            early_end_penalty=early_end_penalty)
@@ -182,12 +205,12 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
 
 def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
                  fixed_level: float | None = None, early_end_penalty: bool = False,
-                 normalize_reward_gamma: float | None = None):
+                 normalize_reward_gamma: float | None = None, curriculum: Curriculum | None = None):
     """The workers' envs as one VecEnv; with normalize_reward_gamma, rewards are normalised (VecNormalize)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
-    factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty)
-                 for _ in range(workers)]
+    factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty,
+                         curriculum) for _ in range(workers)]
     venv = DummyVecEnv(factories) if workers == 1 else SubprocVecEnv(factories, start_method="fork")
     if normalize_reward_gamma is None:
         return venv
@@ -447,6 +470,8 @@ def train(settings: TrainSettings) -> dict:
             load_suite().task(settings.terrain, settings.fixed_level)
         except ValueError as e:
             raise TrainError(f"--level: {e}") from None
+        if settings.curriculum is not None:
+            raise TrainError("--level and --curriculum exclude each other (one level, or a curriculum of levels)")
     config = load_baseline_config(Path(settings.baseline_path), settings.overrides)
     run_dir = settings.run_dir
     previous = read_run(run_dir)
@@ -459,6 +484,7 @@ def train(settings: TrainSettings) -> dict:
         for key, now in (("method", settings.method), ("terrain", settings.terrain), ("seed", settings.seed),
                          ("workers", settings.workers), ("config", cfg_dict),
                          ("fixed_level", settings.fixed_level),
+                         ("curriculum_levels", asdict(settings.curriculum) if settings.curriculum else None),
                          ("init_from", str(settings.init_from) if settings.init_from else None)):
             was = recorded.get(key)
             if was != now:
@@ -476,6 +502,7 @@ def train(settings: TrainSettings) -> dict:
         "started_utc": datetime.now(timezone.utc).isoformat(timespec="seconds"), "hexbench_commit": git_commit(),
         "wall_time_s": 0.0, "env_steps": 0, "checkpoints": [], "curriculum": None, "sessions": [],
         "init_from": init_weights[1] if init_weights else None,
+        "curriculum_levels": asdict(settings.curriculum) if settings.curriculum else None,
     }
     run["total_steps"] = settings.total_steps
     run["command"] = settings.command
@@ -486,7 +513,7 @@ def train(settings: TrainSettings) -> dict:
 
     venv = make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale,
                         settings.fixed_level, getattr(config, "early_end_penalty", False),
-                        config.gamma if getattr(config, "normalize_reward", False) else None)
+                        config.gamma if getattr(config, "normalize_reward", False) else None, settings.curriculum)
     cls = algo_class(config.algo)
     if run["checkpoints"]:
         last = run["checkpoints"][-1]

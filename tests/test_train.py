@@ -297,6 +297,31 @@ def test_fixed_level_trains_there_and_an_unknown_level_is_refused(tmp_path):
     assert len(result.output.strip().splitlines()) == 1, result.output
 
 
+def test_own_curriculum_starts_at_its_level_and_resume_keeps_it(tmp_path):
+    out = tmp_path / "steep"
+    result = train_tiny("ppo_cpg", out, terrain="slopes", extra=("--curriculum", "18:0.5:21"))
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["curriculum"][0]["level"] == 18.0
+    assert run["curriculum_levels"] == {"start_level": 18.0, "level_step": 0.5, "max_level": 21.0,
+                                        "successes_per_level": 20}
+    result = train_tiny("ppo_cpg", out, steps=128, terrain="slopes")  # the paper's curriculum: another run
+    assert result.exit_code == 2 and "curriculum_levels" in result.output, result.output
+
+
+@pytest.mark.parametrize("extra, message", [
+    (("--curriculum", "18:x:21"), "is not START:STEP:TOP"),
+    (("--curriculum", "21:0.5:18"), "START <= TOP"),
+    (("--curriculum", "18:0:21"), "STEP > 0"),
+    (("--curriculum", "18:1:21", "--level", "20"), "exclude each other"),
+])
+def test_bad_curriculum_is_one_line_and_writes_no_run(tmp_path, extra, message):
+    out = tmp_path / "run"
+    result = train_tiny("ppo_cpg", out, terrain="slopes", extra=extra)
+    assert result.exit_code == 2 and message in result.output, result.output
+    assert len(result.output.strip().splitlines()) == 1 and not out.exists()
+
+
 @pytest.mark.parametrize("bad, message", [
     ("unlisted", "not listed in"),
     ("tampered", "corrupt or tampered"),

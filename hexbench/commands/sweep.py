@@ -35,12 +35,12 @@ def register(app: typer.Typer) -> None:
         try:
             eps_values = tuple(float(v) for v in values.split(",") if v.strip())
         except ValueError:
-            console.print(f"[red]error:[/red] --values {values!r} is not a comma-separated list of numbers in [0, 1]", soft_wrap=True)
+            typer.secho(f"error: --values {values!r} is not a comma-separated list of numbers in [0, 1]", fg="red", err=True)
             raise typer.Exit(2) from None
         try:
             overrides = tuple(parse_override(o) for o in override)
         except TrainError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         spec = EpsilonSweep(terrain=terrain, baseline_path=baseline, eps_values=eps_values, trials=trials,
                             steps_per_trial=steps, out_dir=out, overrides=overrides)
@@ -51,7 +51,7 @@ def register(app: typer.Typer) -> None:
                 rows = run_sweep(spec, "hexbench " + shlex.join(sys.argv[1:]),
                                  progress_callback=lambda row: progress.advance(task))
             except TrainError as e:
-                console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+                typer.secho(f"error: {e}", fg="red", err=True)
                 raise typer.Exit(2) from None
         best, means = best_eps(rows)
         table = Table(title=f"eps sweep, {terrain} level {spec.level:g}, {trials} trial(s) x {steps} steps")
@@ -76,10 +76,9 @@ def register(app: typer.Typer) -> None:
 
         from hexbench.sweep import SweepError, plot_sweeps
 
-        console = Console(stderr=True)
         try:
             written = plot_sweeps(sources, out)
         except SweepError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         Console().print("wrote " + ", ".join(str(p) for p in written), soft_wrap=True)

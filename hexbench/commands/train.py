@@ -24,12 +24,13 @@ def register(app: typer.Typer) -> None:
         progress: bool = typer.Option(True, "--progress/--no-progress", help="show the progress bar"),
         device: str = typer.Option("cpu", "--device", help="torch device of the learner: cpu or cuda (SAC/TD3 gain most)"),
         level: float = typer.Option(None, "--level", help="train at this one level of the task suite, without the curriculum"),
+        curriculum: str = typer.Option(None, "--curriculum", help="replace the paper's curriculum: START:STEP:TOP levels in the terrain's unit, e.g. 18:0.5:21 (fine-tuning beyond the paper's top)"),
         init_from: Path = typer.Option(None, "--init-from", help="start a new PPO run from shipped weights, e.g. baselines/checkpoints/ppo_cpg-rough.zip (std and value head from scratch)"),
     ) -> None:
         """Train a baseline (PPO/SAC/TD3 per its CONFIG) on the paper's curriculum; resumes a run."""
         from rich.console import Console
 
-        from hexbench.train import TrainError, TrainSettings, parse_override, train
+        from hexbench.train import TrainError, TrainSettings, parse_curriculum, parse_override, train
 
         err = Console(stderr=True)
         try:
@@ -39,10 +40,11 @@ def register(app: typer.Typer) -> None:
                 overrides=tuple(parse_override(o) for o in override),
                 command="hexbench " + shlex.join(sys.argv[1:]), show_progress=progress, device=device,
                 init_from=init_from, fixed_level=level,
+                curriculum=parse_curriculum(curriculum) if curriculum is not None else None,
             )
             run = train(settings)
         except TrainError as e:
-            err.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         last = run["checkpoints"][-1] if run["checkpoints"] else None
         if last:
@@ -68,7 +70,7 @@ def register(app: typer.Typer) -> None:
         try:
             entry = publish_checkpoint(run_dir, dest, which)
         except TrainError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         console.print(f"published {dest / entry['file']} ({entry['status']}; sha256 {entry['sha256'][:12]}...)",
                       highlight=False, soft_wrap=True)
@@ -95,7 +97,7 @@ def register(app: typer.Typer) -> None:
             table = select(run_dir, episodes=episodes, levels=tuple(levels) or None, stride=stride,
                            min_env_steps=min_env_steps, max_env_steps=max_env_steps, top=top, workers=workers)
         except SelectionError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         out = Table(title=f"{run_dir}: held-out episodes at levels {', '.join(f'{lv:g}' for lv in table['levels'])}")
         for col in ("env steps", "successes", "rate, 95% lower bound", "mean progress \\[m]", "ends"):
@@ -125,7 +127,7 @@ def register(app: typer.Typer) -> None:
         try:
             manifest = read_manifest(dest)
         except CheckpointError as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         bad = 0
         for key, entry in sorted(manifest["checkpoints"].items()):
@@ -156,7 +158,7 @@ def register(app: typer.Typer) -> None:
         try:
             written = plot_curves(sources, out, title, copy_csv, max_env_steps)
         except (CurvesError, OSError, ValueError) as e:
-            console.print(f"[red]error:[/red] {e}", highlight=False, soft_wrap=True)
+            typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         for path in written:
             console.print(f"wrote {path}", highlight=False, soft_wrap=True)
