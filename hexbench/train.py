@@ -37,6 +37,9 @@ exploration std comes from the config and the value function starts fresh (the s
 have had another reward scale). run.json records the source file, sha256 and env steps, so a
 fine-tuned policy's total budget is the source's env steps plus the run's.
 
+`--value-warmup N` (with --init-from) holds the taken-over actor and its std fixed for the first N
+env steps, so that the first updates train the fresh value function only (make_value_warmup).
+
 `--curriculum START:STEP:TOP` replaces the paper's curriculum of the terrain with another one
 (same rule: level up after 20 arrivals; levels in the paper's units), e.g. slopes 18:0.5:21 to
 fine-tune beyond the paper's 18-deg top; run.json records it as `curriculum_levels`. `--level L`
@@ -100,6 +103,7 @@ class TrainSettings:
     device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
     init_from: Path | None = None  # shipped weights (baselines/checkpoints/<method>-<terrain>.zip) to start from
     curriculum: Curriculum | None = None  # replaces the paper's curriculum for the terrain (--curriculum)
+    value_warmup_steps: int = 0  # with init_from: env steps during which only the value function learns
 
     @property
     def method(self) -> str:
@@ -254,6 +258,35 @@ def set_initial_action(model, initial_action) -> None:
 # (the point of fine-tuning at another std), and the value function is learned afresh because the
 # source run's returns may have had another scale (it may have trained without reward normalisation).
 FRESH_ON_INIT_PREFIXES: tuple[str, ...] = ("log_std", "value_net.", "mlp_extractor.value_net.")
+VALUE_PREFIXES: tuple[str, ...] = ("value_net.", "mlp_extractor.value_net.")
+
+
+def make_value_warmup(warmup_steps: int):
+    """A callback that holds the actor (and its std) fixed until `warmup_steps` env steps, so the first
+    PPO updates of a warm start fit the fresh value function instead of moving the taken-over actor by
+    advantages from a value function that knows nothing yet. Parameters without a gradient are left
+    alone by the optimiser; resuming before the end of the warm-up freezes them again."""
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    class ValueWarmup(BaseCallback):
+        def actor_parameters(self):
+            return [p for name, p in self.model.policy.named_parameters() if not name.startswith(VALUE_PREFIXES)]
+
+        def _on_training_start(self) -> None:
+            self.frozen = self.num_timesteps < warmup_steps
+            for p in self.actor_parameters():
+                p.requires_grad_(not self.frozen)
+
+        def _on_rollout_end(self) -> None:  # the update follows: the actor learns from rollouts past warmup_steps
+            if self.frozen and self.model.num_timesteps > warmup_steps:
+                for p in self.actor_parameters():
+                    p.requires_grad_(True)
+                self.frozen = False
+
+        def _on_step(self) -> bool:
+            return True
+
+    return ValueWarmup()
 
 
 def read_init_weights(path: Path, config) -> tuple[dict, dict]:
@@ -472,6 +505,9 @@ def train(settings: TrainSettings) -> dict:
             raise TrainError(f"--level: {e}") from None
         if settings.curriculum is not None:
             raise TrainError("--level and --curriculum exclude each other (one level, or a curriculum of levels)")
+    if settings.value_warmup_steps < 0 or (settings.value_warmup_steps and settings.init_from is None):
+        raise TrainError(f"--value-warmup needs --init-from and a number of env steps >= 0 "
+                         f"(got {settings.value_warmup_steps}{'' if settings.init_from else ' without --init-from'})")
     config = load_baseline_config(Path(settings.baseline_path), settings.overrides)
     run_dir = settings.run_dir
     previous = read_run(run_dir)
@@ -485,6 +521,7 @@ def train(settings: TrainSettings) -> dict:
                          ("workers", settings.workers), ("config", cfg_dict),
                          ("fixed_level", settings.fixed_level),
                          ("curriculum_levels", asdict(settings.curriculum) if settings.curriculum else None),
+                         ("value_warmup_steps", settings.value_warmup_steps or None),
                          ("init_from", str(settings.init_from) if settings.init_from else None)):
             was = recorded.get(key)
             if was != now:
@@ -503,6 +540,7 @@ def train(settings: TrainSettings) -> dict:
         "wall_time_s": 0.0, "env_steps": 0, "checkpoints": [], "curriculum": None, "sessions": [],
         "init_from": init_weights[1] if init_weights else None,
         "curriculum_levels": asdict(settings.curriculum) if settings.curriculum else None,
+        "value_warmup_steps": settings.value_warmup_steps or None,
     }
     run["total_steps"] = settings.total_steps
     run["command"] = settings.command
@@ -582,7 +620,9 @@ def train(settings: TrainSettings) -> dict:
     interrupted = False
     try:
         with progress:
-            model.learn(total_timesteps=remaining, callback=callback, reset_num_timesteps=False)
+            model.learn(total_timesteps=remaining, reset_num_timesteps=False,
+                        callback=[callback, make_value_warmup(settings.value_warmup_steps)]
+                        if settings.value_warmup_steps else callback)
     except KeyboardInterrupt:
         interrupted = True
     finally:

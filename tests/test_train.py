@@ -262,6 +262,34 @@ def test_init_from_shipped_weights_starts_from_that_policy(tmp_path):
     assert entry["init_from"]["sha256"] == run["init_from"]["sha256"]
 
 
+def test_value_warmup_holds_the_actor_then_lets_it_learn(tmp_path):
+    """With --value-warmup N the taken-over actor comes out of the first N env steps (two PPO
+    updates here) exactly as shipped; past N, resumed, it learns."""
+    import torch
+
+    from hexbench.policy import algo_class, load_policy_weights, read_manifest
+
+    shipped = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
+    source = load_policy_weights(shipped, read_manifest(shipped.parent)["checkpoints"]["ppo_cpg-rough"]["sha256"])
+    out = tmp_path / "warmup"
+    extra = ("--init-from", shipped, "--value-warmup", "128", "--set", "learning_rate=1e-3")
+
+    def actor_after(steps: int) -> dict:
+        result = train_tiny("ppo_cpg", out, steps=steps, extra=extra)
+        assert result.exit_code == 0, result.output
+        run = json.loads((out / "run.json").read_text())
+        assert run["value_warmup_steps"] == 128
+        state = algo_class("ppo").load(out / run["checkpoints"][-1]["file"], device="cpu").policy.state_dict()
+        return {k: v for k, v in state.items() if k.startswith(("action_net.", "mlp_extractor.policy_net."))}
+
+    held = actor_after(128)
+    assert held and all(torch.equal(v, torch.as_tensor(source[k])) for k, v in held.items())
+    learned = actor_after(256)
+    assert any(not torch.equal(v, held[k]) for k, v in learned.items())
+    result = train_tiny("ppo_cpg", tmp_path / "cold", extra=("--value-warmup", "128"))
+    assert result.exit_code == 2 and "needs --init-from" in result.output, result.output
+
+
 def test_gsde_trained_weights_act_under_the_plain_config(tmp_path):
     """gSDE changes only how PPO explores (log_std becomes a matrix): its published weights load
     into the baseline's plain config and act as the trained model's deterministic policy."""
