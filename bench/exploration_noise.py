@@ -7,27 +7,69 @@ episode ends: whether the stochastic policy of early training can arrive at all 
 the curriculum needs (20 arrivals per level) and the deterministic protocol does not.
 
     python bench/exploration_noise.py --terrain slopes --levels 11,14,17 --eps 0.4 --std 0,0.05,0.1 --seeds 3
+
+With `--gsde-period N` the noise is state-dependent and smooth in time instead, as SB3's gSDE draws
+it: a_r = (f / |f|) W * std, f the last hidden layer of a fresh ppo_cpg.py actor (256 features of
+the observation, so it follows the gait phase), W a matrix of standard normals redrawn every N
+control steps; every joint's noise then has the given std. (A fresh actor's |f| is about 3.4, so
+SB3's log_std_init = ln(std / 3.4): std 0.06 is about -4.0.)
+
+    python bench/exploration_noise.py --terrain slopes --levels 20 --eps 0.4 --std 0.04,0.06,0.1 --gsde-period 120
 """
 
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 import numpy as np
 
 from hexbench.env import EnvConfig, HexapodEnv
 
 
-def play(terrain: str, level: float, eps: float, std: float, seed: int) -> tuple[str, float, int]:
+def white_noise(std: float, rng: np.random.Generator):
+    def draw(obs: np.ndarray, step: int) -> np.ndarray:
+        return std * rng.standard_normal(18)
+    return draw
+
+
+def gsde_noise(std: float, period: int, rng: np.random.Generator):
+    """SB3-style gSDE noise on a fresh ppo_cpg.py actor's features, scaled to `std` per joint."""
+    import dataclasses
+
+    import torch
+
+    from hexbench.controller import load_controller_module
+    from hexbench.policy import build_policy, scale_observation
+
+    torch.manual_seed(int(rng.integers(2**31)))
+    config = load_controller_module(Path(__file__).resolve().parent.parent / "baselines" / "ppo_cpg.py").CONFIG
+    policy = build_policy(dataclasses.replace(config, use_sde=True))
+    matrix = np.zeros((256, 18))
+
+    def draw(obs: np.ndarray, step: int) -> np.ndarray:
+        nonlocal matrix
+        if step % period == 0:
+            matrix = rng.standard_normal(matrix.shape)
+        with torch.no_grad():
+            x = torch.as_tensor(scale_observation(obs)[None], dtype=torch.float32)
+            features = policy.mlp_extractor.forward_actor(policy.extract_features(x, policy.pi_features_extractor))
+        f = features.numpy()[0]
+        return std * (f / max(float(np.linalg.norm(f)), 1e-9)) @ matrix
+    return draw
+
+
+def play(terrain: str, level: float, eps: float, std: float, seed: int, gsde_period: int = 0) -> tuple[str, float, int]:
     """(end reason, forward progress [m], control steps) of one episode; noise from its own seeded generator."""
     env = HexapodEnv(EnvConfig(terrain=terrain, level=level, action_mode="cpg_residual", residual_scale=eps))
     rng = np.random.default_rng(seed)
+    noise = gsde_noise(std, gsde_period, rng) if gsde_period else white_noise(std, rng)
     try:
-        env.reset(seed=seed)
+        obs, _ = env.reset(seed=seed)
         steps, info = 0, {}
         for steps in range(1, env.config.max_steps + 1):
-            action = np.clip(std * rng.standard_normal(env.action_space.shape), -1.0, 1.0).astype(np.float32)
-            _, _, terminated, truncated, info = env.step(action)
+            action = np.clip(noise(obs, steps - 1), -1.0, 1.0).astype(np.float32)
+            obs, _, terminated, truncated, info = env.step(action)
             if terminated or truncated:
                 break
         return str(info.get("end_reason")), float(info.get("progress_m", 0.0)), steps
@@ -42,6 +84,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--eps", type=float, default=0.4, help="residual scale (ppo_cpg.py: 0.6 / 0.4 / 0.3)")
     parser.add_argument("--std", default="0,0.05,0.1", help="comma-separated std of a_r (ppo_cpg.py starts at 0.10)")
     parser.add_argument("--seeds", type=int, default=3, help="episodes per cell, seeds 0..N-1")
+    parser.add_argument("--gsde-period", type=int, default=0,
+                        help="0: white noise; N: gSDE-like noise, matrix redrawn every N control steps")
     args = parser.parse_args(argv)
 
     from rich.console import Console
@@ -49,15 +93,16 @@ def main(argv: list[str] | None = None) -> int:
 
     levels = [float(v) for v in args.levels.split(",")]
     stds = [float(v) for v in args.std.split(",")]
-    table = Table(title=f"CPG + zero-mean residual noise, {args.terrain}, eps {args.eps:g}: "
-                        f"arrivals of {args.seeds} (mean progress [m]; how the others ended)")
+    kind = f"gSDE-like noise (period {args.gsde_period})" if args.gsde_period else "white noise"
+    table = Table(title=f"CPG + zero-mean residual {kind}, {args.terrain}, eps {args.eps:g}: "
+                        f"arrivals of {args.seeds} (mean progress \\[m]; how the others ended)")
     table.add_column("level")
     for std in stds:
         table.add_column(f"std {std:g} (joint noise {args.eps * std:.3f} rad)", justify="right")
     for level in levels:
         cells = []
         for std in stds:
-            runs = [play(args.terrain, level, args.eps, std, seed) for seed in range(args.seeds)]
+            runs = [play(args.terrain, level, args.eps, std, seed, args.gsde_period) for seed in range(args.seeds)]
             arrived = sum(r[0] == "success" for r in runs)
             others = sorted({r[0] for r in runs if r[0] != "success"})
             cells.append(f"{arrived}/{len(runs)} ({np.mean([r[1] for r in runs]):.2f} m"
