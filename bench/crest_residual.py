@@ -21,6 +21,7 @@ whether the rest of the course fits in the step limit.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import time
 
 import numpy as np
@@ -80,10 +81,11 @@ def play(residual, task, seed: int) -> tuple[str, float, int]:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--level", type=float, default=20.0, help="slopes level [deg]")
+    parser.add_argument("--level", type=float, default=20.0, help="slopes angle [deg], a suite level or any other")
     parser.add_argument("--episodes", type=int, default=3, help="protocol episodes per residual")
     args = parser.parse_args(argv)
-    task = load_suite().task("slopes", args.level)
+    # the 20-deg task's rules (stall window, step limit, noise) at any level, seeds derived from the level
+    task = dataclasses.replace(load_suite().task("slopes", 20.0), level=args.level)
     cases = [("none (open-loop CPG)", bias("knee", 0.0))]
     cases += [(f"bias {kind} a_r={v:+}", bias(kind, v)) for kind, v in
               (("knee", 0.25), ("knee", 0.5), ("ankle", -0.5))]
