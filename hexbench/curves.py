@@ -76,6 +76,11 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
             label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
         if run.get("init_from"):
             label += f", from {run['init_from']['manifest_key']} at {run['init_from']['source_env_steps']:,}"
+        if run.get("value_warmup_steps"):
+            label += f", value warm-up {run['value_warmup_steps']:,}"
+        if run.get("curriculum_levels"):
+            c = run["curriculum_levels"]
+            label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
         if not cfg.get("early_end_penalty", False):
             label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
         total = run.get("total_steps", 0)

@@ -56,11 +56,14 @@ def test_seeds_of_one_config_share_a_colour_and_an_ablation_of_the_same_method_g
     assert line_styles([("ppo_cpg", paper)])[0]["color"] == s[0]["color"]
 
 
-def test_label_names_gsde_exploration_and_a_warm_start(tmp_path):
+def test_label_names_gsde_a_warm_start_its_warm_up_and_own_curriculum(tmp_path):
     folder = write_run(tmp_path / "ppo_cpg-ft", "ppo_cpg", 100, [50, 100])
     run = json.loads((folder / "run.json").read_text())
     run["config"].update(log_std_init=-3.5, use_sde=True, sde_sample_freq=120, normalize_reward=True)
     run["init_from"] = {"manifest_key": "ppo_cpg-rough", "source_env_steps": 180502}
+    run["value_warmup_steps"] = 50000
+    run["curriculum_levels"] = {"start_level": 18.0, "level_step": 0.5, "max_level": 21.0, "successes_per_level": 20}
     (folder / "run.json").write_text(json.dumps(run))
     _, label, _ = load_progress(folder)
     assert "gSDE, matrix std 0.03, new every 120 steps" in label and "from ppo_cpg-rough at 180,502" in label
+    assert "value warm-up 50,000" in label and "curriculum 18:0.5:21" in label
