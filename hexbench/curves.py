@@ -116,13 +116,17 @@ def save_png(fig, out_png: Path) -> Path:
 
 def line_styles(runs: list[tuple[str, dict | None]]) -> list[dict[str, str]]:
     """Colour and line style per (method, run.json) so that seeds read as a group: one colour per
-    method and config (a method's first config gets the method's colour, another config of it, an
-    ablation, the next free one), one line style per seed within it."""
+    method and training recipe (config, warm-start source, value warm-up, curriculum or fixed level;
+    a method's first recipe gets the method's colour, another, an ablation, the next free one), one
+    line style per seed within it."""
     runs_of_group: dict[tuple[str, str], int] = {}
     group_colour: dict[tuple[str, str], str] = {}
     styles = []
     for method, run in runs:
-        group = (method, json.dumps((run or {}).get("config"), sort_keys=True))
+        run = run or {}
+        recipe = {"config": run.get("config"), "init_sha256": (run.get("init_from") or {}).get("sha256"),
+                  **{k: run.get(k) for k in ("value_warmup_steps", "curriculum_levels", "fixed_level")}}
+        group = (method, json.dumps(recipe, sort_keys=True))
         if group not in group_colour:
             first_of_method = all(m != method for m, _ in group_colour)
             extra = sum(c in EXTRA_COLOURS for c in group_colour.values())
@@ -180,7 +184,8 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
                 dest = out_png.parent / f"{stem}.csv"
                 shutil.copyfile(source / "progress.csv", dest)
                 summary = {k: run.get(k) for k in ("method", "terrain", "seed", "workers", "total_steps", "env_steps",
-                                                   "wall_time_s", "started_utc", "hexbench_commit", "config")}
+                                                   "wall_time_s", "started_utc", "hexbench_commit", "config",
+                                                   "init_from", "value_warmup_steps", "curriculum_levels", "fixed_level")}
                 summary["command"] = run["sessions"][0]["command"] if run.get("sessions") else run.get("command")
                 summary["partial"] = run.get("env_steps", 0) < run.get("total_steps", 0)
                 side = dest.with_suffix(".run.json")
