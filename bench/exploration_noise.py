@@ -39,11 +39,11 @@ def gsde_noise(std: float, period: int, rng: np.random.Generator):
 
     import torch
 
-    from hexbench.controller import load_controller_module
     from hexbench.policy import build_policy, scale_observation
+    from hexbench.train import load_baseline_config
 
     torch.manual_seed(int(rng.integers(2**31)))
-    config = load_controller_module(Path(__file__).resolve().parent.parent / "baselines" / "ppo_cpg.py").CONFIG
+    config = load_baseline_config(Path(__file__).resolve().parent.parent / "baselines" / "ppo_cpg.py")
     policy = build_policy(dataclasses.replace(config, use_sde=True))
     matrix = np.zeros((256, 18))
 

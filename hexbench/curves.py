@@ -114,6 +114,10 @@ def save_png(fig, out_png: Path) -> Path:
     return out_png
 
 
+# run.json fields of `hexbench train` options that change how a run learns beside its config
+TRAINING_OPTION_KEYS: tuple[str, ...] = ("value_warmup_steps", "curriculum_levels", "fixed_level")
+
+
 def line_styles(runs: list[tuple[str, dict | None]]) -> list[dict[str, str]]:
     """Colour and line style per (method, run.json) so that seeds read as a group: one colour per
     method and training recipe (config, warm-start source, value warm-up, curriculum or fixed level;
@@ -125,7 +129,7 @@ def line_styles(runs: list[tuple[str, dict | None]]) -> list[dict[str, str]]:
     for method, run in runs:
         run = run or {}
         recipe = {"config": run.get("config"), "init_sha256": (run.get("init_from") or {}).get("sha256"),
-                  **{k: run.get(k) for k in ("value_warmup_steps", "curriculum_levels", "fixed_level")}}
+                  **{k: run.get(k) for k in TRAINING_OPTION_KEYS}}
         group = (method, json.dumps(recipe, sort_keys=True))
         if group not in group_colour:
             first_of_method = all(m != method for m, _ in group_colour)
@@ -185,7 +189,7 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
                 shutil.copyfile(source / "progress.csv", dest)
                 summary = {k: run.get(k) for k in ("method", "terrain", "seed", "workers", "total_steps", "env_steps",
                                                    "wall_time_s", "started_utc", "hexbench_commit", "config",
-                                                   "init_from", "value_warmup_steps", "curriculum_levels", "fixed_level")}
+                                                   "init_from", *TRAINING_OPTION_KEYS)}
                 summary["command"] = run["sessions"][0]["command"] if run.get("sessions") else run.get("command")
                 summary["partial"] = run.get("env_steps", 0) < run.get("total_steps", 0)
                 side = dest.with_suffix(".run.json")
