@@ -26,9 +26,9 @@ import time
 
 import numpy as np
 
-from hexbench.env import HexapodEnv
 from hexbench.robot import JOINT_NAMES, LEG_NAMES
 from hexbench.tasks import load_suite
+from residual_episode import Residual, play_residual
 
 BASE_X = 54  # observation index of base x [m] (hexbench.env module docstring)
 
@@ -37,46 +37,30 @@ def joints(kind: str) -> list[int]:
     return [JOINT_NAMES.index(f"{leg}_{kind}") for leg in LEG_NAMES]
 
 
-def bias(kind: str, value: float):
+def bias(kind: str, value: float) -> Residual:
     index = joints(kind)
 
-    def residual(obs, eps):
+    def residual(obs, step):
         a = np.zeros(len(JOINT_NAMES))
         a[index] = value
         return a
     return residual
 
 
-def knee_amplitude(gain: float):
+def knee_amplitude(gain: float, eps: float) -> Residual:
     index = joints("knee")
 
-    def residual(obs, eps):
+    def residual(obs, step):
         a = np.zeros(len(JOINT_NAMES))
         a[index] = gain * obs[index] / eps
         return a
     return residual
 
 
-def gated(residual, x0_m: float, x1_m: float):
-    def gated_residual(obs, eps):
-        return residual(obs, eps) if x0_m <= obs[BASE_X] <= x1_m else np.zeros(len(JOINT_NAMES))
+def gated(residual: Residual, x0_m: float, x1_m: float) -> Residual:
+    def gated_residual(obs, step):
+        return residual(obs, step) if x0_m <= obs[BASE_X] <= x1_m else np.zeros(len(JOINT_NAMES))
     return gated_residual
-
-
-def play(residual, task, seed: int) -> tuple[str, float, int]:
-    """(end reason, forward progress [m], control steps) of one protocol episode."""
-    env = HexapodEnv(task.env_config("cpg_residual"))
-    try:
-        obs, _ = env.reset(seed=seed)
-        steps, done, info = 0, False, {}
-        while not done:
-            action = np.clip(residual(obs, env.config.eps), -1.0, 1.0).astype(np.float32)
-            obs, _, terminated, truncated, info = env.step(action)
-            steps += 1
-            done = terminated or truncated
-        return str(info["end_reason"]), float(info["progress_m"]), steps
-    finally:
-        env.close()
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -86,16 +70,17 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     # the 20-deg task's rules (stall window, step limit, noise) at any level, seeds derived from the level
     task = dataclasses.replace(load_suite().task("slopes", 20.0), level=args.level)
+    config = task.env_config("cpg_residual")
     cases = [("none (open-loop CPG)", bias("knee", 0.0))]
     cases += [(f"bias {kind} a_r={v:+}", bias(kind, v)) for kind, v in
               (("knee", 0.25), ("knee", 0.5), ("ankle", -0.5))]
-    cases += [("knee amplitude x1.3", knee_amplitude(0.3))]
-    cases += [(f"knee amplitude x1.3, x in [{x0}, 1.3] m", gated(knee_amplitude(0.3), x0, 1.3)) for x0 in (0.75, 0.85)]
+    cases += [("knee amplitude x1.3", knee_amplitude(0.3, config.eps))]
+    cases += [(f"knee amplitude x1.3, x in [{x0}, 1.3] m", gated(knee_amplitude(0.3, config.eps), x0, 1.3)) for x0 in (0.75, 0.85)]
     print(f"slopes {args.level:g} deg, {args.episodes} protocol episodes each: end reason, progress [m], steps")
     for name, residual in cases:
         start = time.perf_counter()
-        results = [play(residual, task, seed) for seed in task.seeds(args.episodes)]
-        ends = "   ".join(f"{reason} {progress:.2f} {steps}" for reason, progress, steps in results)
+        ends = "   ".join(f"{end.end_reason} {end.progress_m:.2f} {end.steps}"
+                           for end in (play_residual(config, residual, seed) for seed in task.seeds(args.episodes)))
         print(f"{name:38s} {ends}   ({time.perf_counter() - start:.0f} s)", flush=True)
     return 0
 

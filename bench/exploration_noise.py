@@ -24,7 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.env import EnvConfig, HexapodEnv
+from hexbench.env import EnvConfig
+from residual_episode import EpisodeEnd, play_residual
 
 
 def white_noise(std: float, rng: np.random.Generator):
@@ -59,22 +60,12 @@ def gsde_noise(std: float, period: int, rng: np.random.Generator):
     return draw
 
 
-def play(terrain: str, level: float, eps: float, std: float, seed: int, gsde_period: int = 0) -> tuple[str, float, int]:
-    """(end reason, forward progress [m], control steps) of one episode; noise from its own seeded generator."""
-    env = HexapodEnv(EnvConfig(terrain=terrain, level=level, action_mode="cpg_residual", residual_scale=eps))
+def play(terrain: str, level: float, eps: float, std: float, seed: int, gsde_period: int = 0) -> EpisodeEnd:
+    """One episode of the CPG plus zero-mean noise; the noise draws from its own generator seeded by `seed`."""
     rng = np.random.default_rng(seed)
     noise = gsde_noise(std, gsde_period, rng) if gsde_period else white_noise(std, rng)
-    try:
-        obs, _ = env.reset(seed=seed)
-        steps, info = 0, {}
-        for steps in range(1, env.config.max_steps + 1):
-            action = np.clip(noise(obs, steps - 1), -1.0, 1.0).astype(np.float32)
-            obs, _, terminated, truncated, info = env.step(action)
-            if terminated or truncated:
-                break
-        return str(info.get("end_reason")), float(info.get("progress_m", 0.0)), steps
-    finally:
-        env.close()
+    return play_residual(EnvConfig(terrain=terrain, level=level, action_mode="cpg_residual", residual_scale=eps),
+                         noise, seed)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -103,9 +94,9 @@ def main(argv: list[str] | None = None) -> int:
         cells = []
         for std in stds:
             runs = [play(args.terrain, level, args.eps, std, seed, args.gsde_period) for seed in range(args.seeds)]
-            arrived = sum(r[0] == "success" for r in runs)
-            others = sorted({r[0] for r in runs if r[0] != "success"})
-            cells.append(f"{arrived}/{len(runs)} ({np.mean([r[1] for r in runs]):.2f} m"
+            arrived = sum(r.end_reason == "success" for r in runs)
+            others = sorted({r.end_reason for r in runs if r.end_reason != "success"})
+            cells.append(f"{arrived}/{len(runs)} ({np.mean([r.progress_m for r in runs]):.2f} m"
                          + (f"; {', '.join(others)}" if others else "") + ")")
         table.add_row(f"{level:g}", *cells)
     Console().print(table)

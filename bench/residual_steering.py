@@ -19,45 +19,27 @@ exploration noise that is white at 60 Hz (SB3's default Gaussian policy) average
 from __future__ import annotations
 
 import argparse
-import math
 
 import numpy as np
 
-from hexbench.env import NO_NOISE, EnvConfig, HexapodEnv
+from hexbench.env import NO_NOISE, EnvConfig
 from hexbench.robot import JOINT_NAMES, LEG_NAMES
+from residual_episode import Residual, play_residual
 
 RIGHT_HIPS = [JOINT_NAMES.index(f"{leg}_hip") for leg in LEG_NAMES if leg.startswith("R")]
 LEFT_HIPS = [JOINT_NAMES.index(f"{leg}_hip") for leg in LEG_NAMES if leg.startswith("L")]
 
 
-def play(residual, steps: int, seed: int) -> tuple[float, float, float]:
-    """(yaw turned [deg], forward progress [m], lateral offset [m]); residual(obs, eps) -> a_r."""
-    env = HexapodEnv(EnvConfig(terrain="flat", noise=NO_NOISE))
-    try:
-        obs, _ = env.reset(seed=seed)
-        yaw0 = float(env.robot_state.base_rpy_rad[2])
-        info = {"progress_m": 0.0, "lateral_m": 0.0}
-        for _ in range(steps):
-            action = np.clip(residual(obs, env.config.eps), -1.0, 1.0)
-            obs, _, terminated, truncated, info = env.step(action)
-            if terminated or truncated:
-                break
-        yaw = float(env.robot_state.base_rpy_rad[2])
-        return math.degrees(yaw - yaw0), float(info["progress_m"]), float(info["lateral_m"])
-    finally:
-        env.close()
-
-
-def bias(value: float, hips: list[int]):
-    def residual(obs, eps):
+def bias(value: float, hips: list[int]) -> Residual:
+    def residual(obs, step):
         a = np.zeros(18)
         a[hips] = value
         return a
     return residual
 
 
-def amplitude(gain_right: float, gain_left: float):
-    def residual(obs, eps):
+def amplitude(gain_right: float, gain_left: float, eps: float) -> Residual:
+    def residual(obs, step):
         a = np.zeros(18)
         a[RIGHT_HIPS] = gain_right * obs[RIGHT_HIPS] / eps
         a[LEFT_HIPS] = gain_left * obs[LEFT_HIPS] / eps
@@ -70,16 +52,17 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--steps", type=int, default=900, help="control steps per episode (60 Hz)")
     parser.add_argument("--seed", type=int, default=1)
     args = parser.parse_args(argv)
+    config = EnvConfig(terrain="flat", noise=NO_NOISE)
     cases = [("none (open-loop CPG)", bias(0.0, RIGHT_HIPS))]
     for v in (0.3, -0.3):
         cases += [(f"bias a_r={v:+} on all hips", bias(v, RIGHT_HIPS + LEFT_HIPS)),
                   (f"bias a_r={v:+} on right hips", bias(v, RIGHT_HIPS))]
     for g in (0.1, 0.3, -0.3):
-        cases.append((f"amplitude right hips x{1 + g:.1f}", amplitude(g, 0.0)))
+        cases.append((f"amplitude right hips x{1 + g:.1f}", amplitude(g, 0.0, config.eps)))
     print(f"{'residual':32s} {'yaw [deg]':>10s} {'progress [m]':>13s} {'lateral [m]':>12s}")
     for name, residual in cases:
-        yaw, progress, lateral = play(residual, args.steps, args.seed)
-        print(f"{name:32s} {yaw:10.1f} {progress:13.2f} {lateral:12.2f}")
+        end = play_residual(config, residual, args.seed, max_steps=args.steps)
+        print(f"{name:32s} {end.yaw_turned_deg:10.1f} {end.progress_m:13.2f} {end.lateral_m:12.2f}")
     return 0
 
 

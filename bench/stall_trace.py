@@ -12,10 +12,9 @@ from __future__ import annotations
 import argparse
 import math
 
-import numpy as np
-
-from hexbench.env import EnvConfig, HexapodEnv
+from hexbench.env import EnvConfig
 from hexbench.robot import LEG_NAMES
+from residual_episode import play_residual, zero_residual
 
 
 def main() -> None:
@@ -26,25 +25,18 @@ def main() -> None:
     ap.add_argument("--every", type=int, default=300, help="control steps between trace lines")
     args = ap.parse_args()
 
-    env = HexapodEnv(EnvConfig(terrain=args.terrain, level=args.level, action_mode="cpg_residual"))
-    try:
-        env.reset(seed=args.seed)
-        action = np.zeros(env.action_space.shape, dtype=np.float32)
-        print(f"{args.terrain} {args.level:g}, seed {args.seed}: step, x [m], z [m], pitch [deg], legs in contact")
-        step, done, info = 0, False, {}
-        while not done:
-            _, _, terminated, truncated, info = env.step(action)
-            step += 1
-            done = terminated or truncated
-            if step % args.every == 0 or done:
-                state = env.robot_state
-                x, _, z = state.base_pos_m
-                pitch_deg = math.degrees(float(state.base_rpy_rad[1]))
-                legs = " ".join(leg for leg, touching in zip(LEG_NAMES, env.sim.foot_contacts()) if touching)
-                print(f"{step:5d}  {x:6.3f}  {z:5.3f}  {pitch_deg:6.1f}  {legs}")
-        print(f"end: {info['end_reason']} after {step} steps, progress {info['progress_m']:.2f} m")
-    finally:
-        env.close()
+    def trace(env, step: int, done: bool) -> None:
+        if step % args.every == 0 or done:
+            state = env.robot_state
+            x, _, z = state.base_pos_m
+            pitch_deg = math.degrees(float(state.base_rpy_rad[1]))
+            legs = " ".join(leg for leg, touching in zip(LEG_NAMES, env.sim.foot_contacts()) if touching)
+            print(f"{step:5d}  {x:6.3f}  {z:5.3f}  {pitch_deg:6.1f}  {legs}")
+
+    print(f"{args.terrain} {args.level:g}, seed {args.seed}: step, x [m], z [m], pitch [deg], legs in contact")
+    config = EnvConfig(terrain=args.terrain, level=args.level, action_mode="cpg_residual")
+    end = play_residual(config, zero_residual, args.seed, on_step=trace)
+    print(f"end: {end.end_reason} after {end.steps} steps, progress {end.progress_m:.2f} m")
 
 
 if __name__ == "__main__":
