@@ -37,8 +37,10 @@ exploration std comes from the config and the value function starts fresh (the s
 have had another reward scale). run.json records the source file, sha256 and env steps, so a
 fine-tuned policy's total budget is the source's env steps plus the run's.
 
-`--value-warmup N` (with --init-from) holds the taken-over actor and its std fixed for the first N
-env steps, so that the first updates train the fresh value function only (make_value_warmup).
+`--value-warmup N` (PPO) holds the actor and its std fixed as initialised, taken over by --init-from
+or fresh, for the first N env steps, so that the first updates train the fresh value function only
+(make_value_warmup). A fresh PPO-CPG actor's mean residual is about 0, so a warm-up from scratch
+holds the open-loop CPG plus exploration noise while the value function learns what it earns.
 
 `--curriculum START:STEP:TOP` replaces the paper's curriculum of the terrain with another one
 (same rule: level up after 20 arrivals; levels in the paper's units), e.g. slopes 18:0.5:21 to
@@ -103,7 +105,7 @@ class TrainSettings:
     device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
     init_from: Path | None = None  # shipped weights (baselines/checkpoints/<method>-<terrain>.zip) to start from
     curriculum: Curriculum | None = None  # replaces the paper's curriculum for the terrain (--curriculum)
-    value_warmup_steps: int = 0  # with init_from: env steps during which only the value function learns
+    value_warmup_steps: int = 0  # PPO: env steps during which only the value function learns
 
     @property
     def method(self) -> str:
@@ -505,10 +507,12 @@ def train(settings: TrainSettings) -> dict:
             raise TrainError(f"--level: {e}") from None
         if settings.curriculum is not None:
             raise TrainError("--level and --curriculum exclude each other (one level, or a curriculum of levels)")
-    if settings.value_warmup_steps < 0 or (settings.value_warmup_steps and settings.init_from is None):
-        raise TrainError(f"--value-warmup needs --init-from and a number of env steps >= 0 "
-                         f"(got {settings.value_warmup_steps}{'' if settings.init_from else ' without --init-from'})")
+    if settings.value_warmup_steps < 0:
+        raise TrainError(f"--value-warmup needs a number of env steps >= 0 (got {settings.value_warmup_steps})")
     config = load_baseline_config(Path(settings.baseline_path), settings.overrides)
+    if settings.value_warmup_steps and config.algo != "ppo":
+        raise TrainError(f"--value-warmup works for PPO baselines only, which learn a value function "
+                         f"beside the actor (this config's algo is {config.algo!r})")
     run_dir = settings.run_dir
     previous = read_run(run_dir)
     cfg_dict = config_dict(config)

@@ -286,8 +286,30 @@ def test_value_warmup_holds_the_actor_then_lets_it_learn(tmp_path):
     assert held and all(torch.equal(v, torch.as_tensor(source[k])) for k, v in held.items())
     learned = actor_after(256)
     assert any(not torch.equal(v, held[k]) for k, v in learned.items())
-    result = train_tiny("ppo_cpg", tmp_path / "cold", extra=("--value-warmup", "128"))
-    assert result.exit_code == 2 and "needs --init-from" in result.output, result.output
+
+
+def test_value_warmup_holds_a_fresh_actor_too(tmp_path):
+    """Without --init-from the warm-up holds the fresh actor (a PPO-CPG residual of about 0: the CPG)
+    while the value function learns; off-policy baselines, which have no value function, refuse it."""
+    import torch
+
+    from hexbench.policy import algo_class
+
+    def actor(name: str, *extra: str) -> dict:
+        out = tmp_path / name
+        result = train_tiny("ppo_cpg", out, steps=128, extra=("--set", "learning_rate=1e-3", *extra))
+        assert result.exit_code == 0, result.output
+        run = json.loads((out / "run.json").read_text())
+        state = algo_class("ppo").load(out / run["checkpoints"][-1]["file"], device="cpu").policy.state_dict()
+        return {k: v for k, v in state.items() if k.startswith(("action_net.", "mlp_extractor.policy_net."))}
+
+    held, held_longer = actor("held", "--value-warmup", "128"), actor("held-longer", "--value-warmup", "100000")
+    learned = actor("learned")
+    assert all(torch.equal(v, held_longer[k]) for k, v in held.items())
+    assert any(not torch.equal(v, learned[k]) for k, v in held.items())
+    result = train_tiny("sac_cpg", tmp_path / "sac", extra=("--value-warmup", "128"))
+    assert result.exit_code == 2 and "PPO baselines only" in result.output, result.output
+    assert not (tmp_path / "sac").exists()
 
 
 def test_gsde_trained_weights_act_under_the_plain_config(tmp_path):

@@ -25,7 +25,7 @@ def register(app: typer.Typer) -> None:
         device: str = typer.Option("cpu", "--device", help="torch device of the learner: cpu or cuda (SAC/TD3 gain most)"),
         level: float = typer.Option(None, "--level", help="train at this one level of the task suite, without the curriculum"),
         curriculum: str = typer.Option(None, "--curriculum", help="replace the paper's curriculum: START:STEP:TOP levels in the terrain's unit, e.g. 18:0.5:21 (fine-tuning beyond the paper's top)"),
-        value_warmup: int = typer.Option(0, "--value-warmup", help="with --init-from: env steps during which only the fresh value function learns (the actor stays as loaded)"),
+        value_warmup: int = typer.Option(0, "--value-warmup", help="PPO: env steps during which only the fresh value function learns (the actor stays as initialised: loaded by --init-from, or fresh)"),
         init_from: Path = typer.Option(None, "--init-from", help="start a new PPO run from shipped weights, e.g. baselines/checkpoints/ppo_cpg-rough.zip (std and value head from scratch)"),
     ) -> None:
         """Train a baseline (PPO/SAC/TD3 per its CONFIG) on the paper's curriculum; resumes a run."""
