@@ -4,7 +4,9 @@
 runs, this plays each named checkpoint on the same held-out seeds (hexbench.selection's `heldout`
 namespace, never a protocol seed) at the levels given, under the protocol's rules, and prints
 successes per level, and forward progress (mean and max over all its episodes), which tells
-checkpoints apart where none arrives. Nothing is written to the runs' selection.json.
+checkpoints apart where none arrives. Nothing is written to the runs' selection.json. A level
+between suite levels (e.g. slopes 19.5) plays under the next suite level's rules, with its own
+held-out seeds: a diagnostic of thresholds, not a score.
 
     python bench/compare_checkpoints.py training/ppo_cpg-rough-seed0-v2:180502 \\
         training/ppo_cpg-rough-seed0-v4:218704 --levels 5 7 9 11 --episodes 20 --workers 2
@@ -21,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from hexbench.selection import heldout_seeds, score_job
+from hexbench.tasks import load_suite
 from hexbench.train import TrainError, checkpoint_at, read_run
 
 
@@ -49,7 +52,12 @@ def main() -> None:
     if len(terrains) != 1:
         raise SystemExit(f"error: candidates come from different terrains: {', '.join(sorted(terrains))}")
     terrain = terrains.pop()
-    jobs = [(run, str(d), c, lv, seed) for run, d, c in candidates for lv in args.levels
+    try:
+        for level in args.levels:
+            load_suite().task_between(terrain, level)
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
+    jobs = [(run, str(d), c, lv, seed, True) for run, d, c in candidates for lv in args.levels
             for seed in heldout_seeds(terrain, lv, args.episodes)]
     with get_context("spawn").Pool(args.workers) as pool:
         outcomes = list(pool.imap_unordered(score_job, jobs))

@@ -21,7 +21,6 @@ whether the rest of the course fits in the step limit.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 
 import numpy as np
@@ -65,11 +64,13 @@ def gated(residual: Residual, x0_m: float, x1_m: float) -> Residual:
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--level", type=float, default=20.0, help="slopes angle [deg], a suite level or any other")
+    parser.add_argument("--level", type=float, default=20.0, help="slopes angle [deg], a suite level or any below the top")
     parser.add_argument("--episodes", type=int, default=3, help="protocol episodes per residual")
     args = parser.parse_args(argv)
-    # the 20-deg task's rules (stall window, step limit, noise) at any level, seeds derived from the level
-    task = dataclasses.replace(load_suite().task("slopes", 20.0), level=args.level)
+    try:  # a level between suite levels: the next suite level's rules, seeds derived from the level
+        task = load_suite().task_between("slopes", args.level)
+    except ValueError as e:
+        raise SystemExit(f"error: {e}") from None
     config = task.env_config("cpg_residual")
     cases = [("none (open-loop CPG)", bias("knee", 0.0))]
     cases += [(f"bias {kind} a_r={v:+}", bias(kind, v)) for kind, v in

@@ -69,13 +69,15 @@ def _run_config(run: dict):
     return replace(base, **values)
 
 
-def play_episode(policy, config, terrain: str, level: float, seed: int) -> EpisodeOutcome:
-    """One deterministic episode of `policy` under the protocol's rules at (terrain, level)."""
+def play_episode(policy, config, terrain: str, level: float, seed: int, between_levels: bool = False) -> EpisodeOutcome:
+    """One deterministic episode of `policy` under the protocol's rules at (terrain, level); with
+    `between_levels`, a level between suite levels plays under the next one's rules (Suite.task_between)."""
     from hexbench.env import HexapodEnv
     from hexbench.policy import PolicyController
     from hexbench.tasks import load_suite
 
-    task = load_suite().task(terrain, level)
+    suite = load_suite()
+    task = suite.task_between(terrain, level) if between_levels else suite.task(terrain, level)
     env = HexapodEnv(task.env_config(config.action_mode, residual_scale=config.residual_scale))
     try:
         controller = PolicyController(config.action_mode, policy)
@@ -90,20 +92,20 @@ def play_episode(policy, config, terrain: str, level: float, seed: int) -> Episo
 
 
 def score_job(job: tuple) -> tuple[str, float, int, dict]:
-    """One held-out episode: job = (run.json dict, run directory, checkpoint entry, level, seed);
-    returns (checkpoint sha256, level, seed, outcome or {"error": one line})."""
+    """One held-out episode: job = (run.json dict, run directory, checkpoint entry, level, seed[,
+    between_levels]); returns (checkpoint sha256, level, seed, outcome or {"error": one line})."""
     import torch
 
     from hexbench.policy import CheckpointError, load_policy
 
     torch.set_num_threads(1)
-    run, run_dir, ckpt, level, seed = job
+    run, run_dir, ckpt, level, seed, *between_levels = job
     config = _run_config(run)
     try:
         policy = load_policy(config, Path(run_dir) / ckpt["file"], ckpt["sha256"])
     except CheckpointError as e:
         return ckpt["sha256"], level, seed, {"error": str(e)}
-    out = play_episode(policy, config, run["terrain"], level, seed)
+    out = play_episode(policy, config, run["terrain"], level, seed, bool(between_levels and between_levels[0]))
     return ckpt["sha256"], level, seed, {"success": out.success, "progress_m": round(out.progress_m, 4),
                                          "end_reason": out.end_reason}
 

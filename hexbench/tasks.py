@@ -18,7 +18,7 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -125,6 +125,18 @@ class Suite:
                 return t
         valid = ", ".join(format_level(v) for v in self.levels(terrain))
         raise ValueError(f"unknown {terrain} level {format_level(level)}; valid levels: {valid}")
+
+    def task_between(self, terrain: str, level: float) -> TaskSpec:
+        """A diagnostic task at any level up to the terrain's top, e.g. slopes 19.5 deg: a suite level's
+        own task, else the next suite level up with this level (its rules, seeds derived from this level).
+        Never scored; for probing thresholds between suite levels (bench/compare_checkpoints.py)."""
+        try:
+            return self.task(terrain, level)
+        except ValueError as e:
+            above = [t for t in self.all_tasks if t.terrain == terrain and t.level > float(level)]
+            if not above:
+                raise ValueError(f"{e} (or any level below the top)") from None
+            return replace(min(above, key=lambda t: t.level), level=float(level))
 
     def select(self, terrains: list[str] | None = None, levels: list[float] | None = None) -> list[TaskSpec]:
         """Tasks of the given terrains (default: the full run's) and levels (default all of each terrain).
