@@ -16,11 +16,15 @@ from __future__ import annotations
 import json
 import math
 import shutil
+import textwrap
 from pathlib import Path
 
 import pandas as pd
 
 from hexbench.train import CSV_COLUMNS
+
+LEGEND_LINE_CHARS = 120  # run labels wrap at this many characters
+LEGEND_LINE_IN = 0.13  # height of one legend line at font size 7 [inch]
 
 
 METHOD_COLOURS: dict[str, str] = {"ppo_cpg": "C0", "ppo": "C3", "hrl": "C2", "sac_cpg": "C1", "td3_cpg": "C4",
@@ -160,7 +164,8 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
     fig, (ax_r, ax_s, ax_l) = plt.subplots(3, 1, figsize=(9, 10.5), sharex=True, height_ratios=(3, 2, 2))
     styles = line_styles([(run.get("method") if run else Path(source).stem.split("-")[0], run)
                           for source, (_agg, _label, run) in zip(sources, loaded)])
-    for (agg, label, _run), style in zip(loaded, styles):
+    labels = ["\n".join(textwrap.wrap(label, LEGEND_LINE_CHARS)) for _agg, label, _run in loaded]
+    for (agg, _label, _run), label, style in zip(loaded, labels, styles):
         style = {**style, "label": label}
         ax_r.plot(agg["env_steps"], agg["mean_episode_reward"], **style)
         ax_s.plot(agg["env_steps"], agg["success_rate"], **style)
@@ -172,12 +177,16 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
     ax_l.set_xlabel("env steps" if max_env_steps is None else f"env steps (first {max_env_steps:,} of every run)")
     if max_env_steps is not None:
         ax_l.set_xlim(0, max_env_steps)
-    ax_r.legend(fontsize=7)
+    # the legend goes under the panels, as tall as its (wrapped) lines: run labels name whole recipes
+    legend_in = LEGEND_LINE_IN * sum(label.count("\n") + 1 for label in labels) + 0.2
+    width_in, height_in = fig.get_size_inches()
+    fig.set_size_inches(width_in, height_in + legend_in)
+    fig.legend(*ax_r.get_legend_handles_labels(), loc="lower left", fontsize=7, frameon=False)  # one entry per run
     ax_r.grid(alpha=0.3)
     ax_s.grid(alpha=0.3)
     ax_l.grid(alpha=0.3)
     fig.suptitle(title or "hexbench learning curves")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, legend_in / (height_in + legend_in), 1, 1))
     out_png = save_png(fig, out_png)
     written = [out_png]
     if copy_csv:
