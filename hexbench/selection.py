@@ -99,13 +99,14 @@ def score_job(job: tuple) -> tuple[str, float, int, dict]:
     from hexbench.policy import CheckpointError, load_policy
 
     torch.set_num_threads(1)
-    run, run_dir, ckpt, level, seed, *between_levels = job
+    run, run_dir, ckpt, level, seed, *options = job
+    between_levels = bool(options and options[0])
     config = _run_config(run)
     try:
         policy = load_policy(config, Path(run_dir) / ckpt["file"], ckpt["sha256"])
     except CheckpointError as e:
         return ckpt["sha256"], level, seed, {"error": str(e)}
-    out = play_episode(policy, config, run["terrain"], level, seed, bool(between_levels and between_levels[0]))
+    out = play_episode(policy, config, run["terrain"], level, seed, between_levels)
     return ckpt["sha256"], level, seed, {"success": out.success, "progress_m": round(out.progress_m, 4),
                                          "end_reason": out.end_reason}
 
