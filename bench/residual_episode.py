@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from hexbench.env import EnvConfig, HexapodEnv
+from hexbench.robot import JOINT_NAMES
 
 # (noisy observation, control step from 0) -> a_r, clipped to [-1, 1] before it is sent
 Residual = Callable[[np.ndarray, int], np.ndarray]
@@ -24,7 +25,7 @@ StepHook = Callable[[HexapodEnv, int, bool], None]
 
 def zero_residual(obs: np.ndarray, step: int) -> np.ndarray:
     """a_r = 0: the open-loop CPG."""
-    return np.zeros(18)
+    return np.zeros(len(JOINT_NAMES))
 
 
 @dataclass(frozen=True)
@@ -44,7 +45,7 @@ def play_residual(config: EnvConfig, residual: Residual, seed: int, *, max_steps
         obs, _ = env.reset(seed=seed)
         yaw0_rad = float(env.robot_state.base_rpy_rad[2])
         limit = config.max_steps if max_steps is None else max_steps
-        steps, done, info = 0, False, {"end_reason": "running", "progress_m": 0.0, "lateral_m": 0.0}
+        steps, done, info = 0, False, {"progress_m": 0.0, "lateral_m": 0.0}
         while not done and steps < limit:
             action = np.clip(residual(obs, steps), -1.0, 1.0).astype(np.float32)
             obs, _, terminated, truncated, info = env.step(action)

@@ -265,9 +265,9 @@ VALUE_PREFIXES: tuple[str, ...] = ("value_net.", "mlp_extractor.value_net.")
 
 def make_value_warmup(warmup_steps: int):
     """A callback that holds the actor (and its std) fixed until `warmup_steps` env steps, so the first
-    PPO updates of a warm start fit the fresh value function instead of moving the taken-over actor by
-    advantages from a value function that knows nothing yet. Parameters without a gradient are left
-    alone by the optimiser; resuming before the end of the warm-up freezes them again."""
+    PPO updates fit the fresh value function instead of moving the actor (taken over by a warm start,
+    or fresh) by advantages from a value function that knows nothing yet. Parameters without a
+    gradient are left alone by the optimiser; resuming before the end of the warm-up freezes them again."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class ValueWarmup(BaseCallback):
