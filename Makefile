@@ -6,8 +6,8 @@ PY := $(VENV)/bin/python
 TORCH_SPEC ?= torch==2.13.0
 TORCH_PIP_ARGS ?=
 
-.PHONY: setup run test test-all browser
-setup: $(VENV)/.installed
+.PHONY: setup run test test-all browser sandbox
+setup: $(VENV)/.installed sandbox
 
 $(VENV)/.installed: pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)
@@ -17,6 +17,13 @@ $(VENV)/.installed: pyproject.toml
 
 run: setup
 	$(VENV)/bin/hexbench run baselines/ppo_cpg.py
+
+# bubblewrap isolates each submitted controller (hexbench/sandbox.py); libseccomp2 backs its seccomp
+# filter. Without them hexbench falls back to --isolation process and says so.
+sandbox:
+	@(test -x /usr/bin/bwrap && /sbin/ldconfig -p | grep -q libseccomp.so.2) \
+		|| (apt-get update && apt-get install -y bubblewrap libseccomp2) \
+		|| echo "bubblewrap could not be installed; controllers will run with --isolation process"
 
 # Headless Chromium for the leaderboard's browser test (Debian's chromium); the test skips if it cannot be had.
 browser:

@@ -36,6 +36,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from hexbench.env import ACTION_MODES
+from hexbench.errors import HexbenchError
 
 
 @runtime_checkable
@@ -58,7 +59,7 @@ class SeeingController(Controller, Protocol):
     def see(self, image: np.ndarray) -> object: ...
 
 
-class ControllerError(Exception):
+class ControllerError(HexbenchError):
     """A submitted controller misbehaved; the message is one line naming file and problem."""
 
 
@@ -105,11 +106,21 @@ def make_controller(path: str | Path, task) -> Controller:
 
 
 def check_action(action, expected_dim: int, where: str) -> np.ndarray:
-    """Validate one action (type, shape, dtype, finite, within [-1, 1]); ControllerError if bad."""
-    if action is None:
+    """Validate one action (type, shape, dtype, finite, within [-1, 1]); ControllerError if bad.
+
+    Returns it as float32, the action space's dtype: the evaluator applies and logs exactly that.
+    `action` may also be a stand-in from the sandbox (hexbench.sandbox.NotAnArray / WrongDtype)
+    saying what the controller returned instead of a float array.
+    """
+    type_name = getattr(action, "type_name", None)
+    if action is None or type_name == "NoneType":
         raise ControllerError(f"{where}: act() returned None; expected a float array of shape ({expected_dim},)")
-    if not isinstance(action, np.ndarray):
-        raise ControllerError(f"{where}: act() returned {type(action).__name__}; expected a numpy float array of shape ({expected_dim},)")
+    if type_name is not None or not isinstance(action, np.ndarray) and not hasattr(action, "dtype"):
+        name = type_name or type(action).__name__
+        raise ControllerError(f"{where}: act() returned {name}; expected a numpy float array of shape ({expected_dim},)")
+    dtype = getattr(action, "dtype", None)
+    if not isinstance(action, np.ndarray):  # WrongDtype stand-in
+        raise ControllerError(f"{where}: action dtype is {dtype}; expected float32 or float64")
     if action.dtype.kind != "f":
         raise ControllerError(f"{where}: action dtype is {action.dtype}; expected float32 or float64")
     if action.shape != (expected_dim,):
@@ -118,4 +129,4 @@ def check_action(action, expected_dim: int, where: str) -> np.ndarray:
         raise ControllerError(f"{where}: action contains NaN or infinite values")
     if np.any(np.abs(action) > 1.0 + 1e-6):
         raise ControllerError(f"{where}: action outside [-1, 1] (max |a| = {float(np.max(np.abs(action))):.3g})")
-    return action.astype(np.float64)
+    return np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)

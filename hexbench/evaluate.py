@@ -1,44 +1,48 @@
 """Run a controller file over protocol tasks: episodes in worker processes, resumable, records.
 
-One episode is a pure function of (task, seed, controller file): `run_episode(EpisodeJob)`
-builds a fresh environment and controller, plays until the episode ends and returns its
-outcome row (and, when recording, its log files). `evaluate(...)` fans episodes out over
-worker processes, journals each finished episode under OUT/.journal/ (so a re-run with the
-same OUT skips it), and at the end writes OUT/episodes.parquet and OUT/result.json, each to a
-temporary name first. A resumed run's record counts the wall time of every invocation that
-produced its episodes (`run_time`). A controller that misbehaves stops its run with a `ControllerError`;
-the run's journal entries are removed so no partial result remains.
+One episode is a function of (task, seed, controller file): `run_episode(EpisodeJob)` gets the
+worker's sandboxed controller for the task (hexbench.sandbox), plays the episode through the one
+episode loop (hexbench.rollout), writes its action log (always: OUT/episodes/<id>.actions, the
+proof the record's row can be replayed from) and, when recording, its MCAP and .rrd, and returns
+the outcome row. `evaluate(...)` fans episodes out over worker processes (each pinned to one core,
+its controller process with it: the observation/action round trip is then a few microseconds),
+journals each finished episode under OUT/.journal/ (only the evaluator writes there; a resumed run
+re-checks every journal entry against its action log by replay before taking it), and at the end
+writes OUT/episodes.parquet and OUT/result.json, each to a temporary name first. A controller that
+misbehaves stops its run with one `ControllerError` line; the files this invocation wrote are
+removed (never files it did not write), so no partial result remains.
 """
 
 from __future__ import annotations
 
 import json
-import math
 import os
 import platform
 import shutil
-import signal
 import socket
 import subprocess
 import sys
 import time
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from multiprocessing import get_context
 from pathlib import Path
 
-import numpy as np
-
 import hexbench
-from hexbench.controller import ControllerError, check_action, file_sha256, make_controller
-from hexbench.env import HexapodEnv
+from hexbench import action_log, sandbox
+from hexbench.controller import ControllerError
+from hexbench.errors import HexbenchError, OutputError
+from hexbench.files import make_folder, os_reason, sha256_file, write_text_atomic
+from hexbench.records import episode_record_rows, episodes_digest
+from hexbench.rollout import ROW_FIELDS, LoggedActions, ReplayMismatch, play
 from hexbench.scoring import summarize_levels, summarize_terrains
+from hexbench.seeds import SeedSet, controller_seed, run_secret
 from hexbench.tasks import TaskSpec, format_level
 
-ACT_TIMEOUT_S = 1.0  # protocol v1: one act() call may take at most this long [s]
+ACT_TIMEOUT_S = sandbox.DEFAULT_LIMITS.call_timeout_s  # protocol v1: one act() call may take at most this long [s]
 RESULT_SCHEMA = Path(__file__).parent / "schemas" / "result.schema.json"
+file_sha256 = sha256_file
 
 
 @dataclass(frozen=True)
@@ -47,47 +51,21 @@ class EpisodeJob:
     task: TaskSpec
     index: int
     seed: int
-    record_dir: str | None = None  # where episode logs go; None: no recording
+    record_dir: str | None = None  # where MCAP/.rrd logs go; None: no recording
     act_timeout_s: float = ACT_TIMEOUT_S
     max_steps: int | None = None  # override (hexbench check); None: the task's limit
+    log_dir: str | None = None  # where the action log goes (OUT/episodes); None: not written
+    isolation: str = "bubblewrap"
+    secret_hex: str = ""  # the run secret controller seeds are derived from ("" : a fixed one, for checks)
+    make_timeout_s: float = sandbox.DEFAULT_LIMITS.make_timeout_s
 
     @property
     def episode_id(self) -> str:
         return f"{self.task.terrain}-{format_level(self.task.level)}{self.task.unit}-{self.index:02d}"
 
-
-class _ActTimeout(Exception):
-    pass
-
-
-@contextmanager
-def _time_limit(seconds: float):
-    """Raise _ActTimeout if the block runs longer than `seconds` (main thread, Unix)."""
-    if seconds <= 0 or not hasattr(signal, "setitimer"):
-        yield
-        return
-
-    def _raise(signum, frame):
-        raise _ActTimeout()
-
-    old = signal.signal(signal.SIGALRM, _raise)
-    signal.setitimer(signal.ITIMER_REAL, seconds)
-    try:
-        yield
-    finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, old)
-
-
-_CONTROLLERS: dict[tuple[str, str, TaskSpec], object] = {}
-
-
-def _controller_for(job: EpisodeJob):
-    """One controller per (file content, task) per process, built on first use."""
-    key = (job.controller_file, file_sha256(job.controller_file), job.task)
-    if key not in _CONTROLLERS:
-        _CONTROLLERS[key] = make_controller(job.controller_file, job.task)
-    return _CONTROLLERS[key]
+    @property
+    def limits(self) -> sandbox.Limits:
+        return sandbox.Limits(call_timeout_s=self.act_timeout_s, make_timeout_s=self.make_timeout_s)
 
 
 def _make_recorder(job: EpisodeJob, action_mode: str):
@@ -106,76 +84,19 @@ def _make_recorder(job: EpisodeJob, action_mode: str):
 
 def run_episode(job: EpisodeJob) -> dict:
     """Play one episode; return its outcome row. Raises ControllerError for a bad controller."""
-    ctrl = _controller_for(job)
-    where = f"{job.controller_file}"
-    mode = ctrl.action_mode
-    cfg = job.task.env_config(mode)
-    if job.max_steps is not None:
-        from dataclasses import replace
-
-        cfg = replace(cfg, max_steps=job.max_steps)
-    env = HexapodEnv(cfg)
-    recorder = None
+    actor = sandbox.controller_for(job.controller_file, job.task, job.isolation, job.limits)
+    recorder = _make_recorder(job, actor.action_mode)
+    secret = bytes.fromhex(job.secret_hex) if job.secret_hex else b"hexbench-check"
     try:
-        obs, _ = env.reset(seed=job.seed)
-        recorder = _make_recorder(job, mode)
-        if recorder is not None:
-            recorder.on_reset(env)
-        try:
-            with _time_limit(job.act_timeout_s):
-                ctrl.reset(job.seed)
-        except _ActTimeout:
-            raise ControllerError(f"{where}: reset() took longer than {job.act_timeout_s:g} s") from None
-        except ControllerError:
-            raise
-        except BaseException as e:  # noqa: BLE001
-            raise ControllerError(f"{where}: reset() raised {type(e).__name__}: {e}") from None
-        see = _camera_channel(ctrl, env, where, job.act_timeout_s)
-        dim = env.action_space.shape[0]
-        dt = cfg.physics.control_dt_s
-        rolls, pitches = [], []
-        energy_j = 0.0
-        max_abs_y = 0.0
-        time_to_goal = None
-        step = 0
-        while True:
-            if see is not None:
-                see(step)
-            try:
-                with _time_limit(job.act_timeout_s):
-                    action = ctrl.act(obs.copy())
-            except _ActTimeout:
-                raise ControllerError(f"{where}: act() took longer than {job.act_timeout_s:g} s at step {step}") from None
-            except BaseException as e:  # noqa: BLE001
-                raise ControllerError(f"{where}: act() raised {type(e).__name__} at step {step}: {e}") from None
-            action = check_action(action, dim, f"{where}: step {step}")
-            obs, reward, terminated, truncated, info = env.step(action)
-            step += 1
-            state = env.robot_state
-            rolls.append(state.base_rpy_rad[0])
-            pitches.append(state.base_rpy_rad[1])
-            energy_j += float(np.sum(np.abs(state.joint_torque_nm * state.joint_vel_rad_per_s))) * dt
-            max_abs_y = max(max_abs_y, abs(info["lateral_m"]))
-            if recorder is not None:
-                recorder.on_step(env, obs, action, reward, info)
-            if terminated or truncated:
-                break
-        reason = info["end_reason"]
-        progress = info["progress_m"]
-        sim_time = step * dt
-        if reason == "success":
-            time_to_goal = sim_time
-        weight_n = cfg.robot.total_mass_kg * cfg.physics.gravity_m_per_s2
-        row = {
-            "terrain": job.task.terrain, "level": job.task.level, "index": job.index, "seed": job.seed,
-            "success": reason == "success", "end_reason": reason, "steps": step, "sim_time_s": sim_time,
-            "progress_m": progress, "time_to_goal_s": time_to_goal,
-            "mean_forward_speed_m_per_s": progress / sim_time if sim_time > 0 else None,
-            "max_abs_y_m": max_abs_y,
-            "roll_rms_deg": math.degrees(float(np.sqrt(np.mean(np.square(rolls))))),
-            "pitch_rms_deg": math.degrees(float(np.sqrt(np.mean(np.square(pitches))))),
-            "cost_of_transport": energy_j / (weight_n * progress) if progress > 0.05 else None,
-        }
+        episode = play(job.task, job.seed, actor, index=job.index, controller_seed=controller_seed(secret, job.seed),
+                       recorder=recorder, max_steps=job.max_steps, where=job.controller_file)
+        row = episode.row
+        if job.log_dir is not None:
+            log = action_log.ActionLog(job.task.protocol, job.task.terrain, job.task.level, job.index, job.seed,
+                                       actor.action_mode, episode.actions)
+            name = job.episode_id + action_log.SUFFIX
+            row["action_log_path"] = name
+            row["action_log_sha256"] = action_log.write(Path(job.log_dir) / name, log)
         if recorder is not None:
             row.update(recorder.on_end(row))
             recorder = None
@@ -183,38 +104,30 @@ def run_episode(job: EpisodeJob) -> dict:
     finally:
         if recorder is not None:
             recorder.abort()
-        env.close()
 
 
-def _camera_channel(ctrl, env: HexapodEnv, where: str, timeout_s: float):
-    """For a controller with a camera (hexbench.controller.SeeingController): step -> maybe call see(image)."""
-    camera = getattr(ctrl, "camera", None)
-    if camera is None or not callable(getattr(ctrl, "see", None)):
-        return None
-    from hexbench.camera import CameraSpec, robot_camera_image
-    from hexbench.controller import CAMERA_EVERY_STEPS, CAMERA_GROUND_RGB
-    from hexbench.dataset.views import paint_terrain
+def replay_row(task: TaskSpec, row: dict, log_dir: Path, max_steps: int | None = None) -> dict:
+    """Re-simulate an episode row from its action log alone; return the replayed row.
 
-    if not isinstance(camera, CameraSpec):
-        raise ControllerError(f"{where}: camera is a {type(camera).__name__}; expected hexbench.camera.CameraSpec")
-    every = getattr(ctrl, "camera_every_steps", CAMERA_EVERY_STEPS)
-    if not isinstance(every, int) or every < 1:
-        raise ControllerError(f"{where}: camera_every_steps must be a positive int, got {every!r}")
-    paint_terrain(env.sim, CAMERA_GROUND_RGB)
+    Raises ActionLogError (missing, corrupt, or sha256 differs from the row) or ReplayMismatch.
+    """
+    where = str(log_dir / str(row.get("action_log_path", "?")))
+    if not row.get("action_log_path") or not row.get("action_log_sha256"):
+        raise action_log.ActionLogError(f"{task.name} episode {row.get('index')}: the row names no action log")
+    log = action_log.read(log_dir / str(row["action_log_path"]), row["action_log_sha256"])
+    if (log.terrain, float(log.level), log.index, log.seed) != (task.terrain, float(task.level), row["index"], row["seed"]):
+        raise action_log.ActionLogError(f"{where}: the action log belongs to another episode "
+                                        f"({log.terrain} {log.level:g} #{log.index}, seed {log.seed})")
+    return play(task, int(row["seed"]), LoggedActions(log, where), index=int(row["index"]), max_steps=max_steps,
+                where=where).row
 
-    def see(step: int) -> None:
-        if step % every:
-            return
-        image = robot_camera_image(env.sim, camera)
-        try:
-            with _time_limit(timeout_s):
-                ctrl.see(image)
-        except _ActTimeout:
-            raise ControllerError(f"{where}: see() took longer than {timeout_s:g} s at step {step}") from None
-        except BaseException as e:  # noqa: BLE001
-            raise ControllerError(f"{where}: see() raised {type(e).__name__} at step {step}: {e}") from None
 
-    return see
+def first_row_difference(stored: dict, replayed: dict) -> str | None:
+    """The first outcome field in which a stored row and its replay differ (exact: the physics is deterministic)."""
+    for key in ROW_FIELDS:
+        if stored.get(key) != replayed.get(key):
+            return f"{key}: recorded {stored.get(key)!r}, replayed {replayed.get(key)!r}"
+    return None
 
 
 def _exit_when_orphaned(parent_pid: int, poll_s: float = 1.0) -> None:
@@ -225,17 +138,35 @@ def _exit_when_orphaned(parent_pid: int, poll_s: float = 1.0) -> None:
     os._exit(1)
 
 
-def _worker_init(parent_pid: int) -> None:
+def _worker_init(parent_pid: int, next_core=None) -> None:
     import threading
+    from multiprocessing import util
 
     threading.Thread(target=_exit_when_orphaned, args=(parent_pid,), daemon=True, name="orphan-watchdog").start()
+    util.Finalize(None, sandbox.close_all, exitpriority=10)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
+    if next_core is not None:
+        with next_core.get_lock():
+            slot = next_core.value
+            next_core.value += 1
+        pin_to_core(slot)
     try:
         import torch
 
         torch.set_num_threads(1)
     except ImportError:
         pass
+
+
+def pin_to_core(slot: int) -> set[int] | None:
+    """Pin this process (and the controller processes it starts) to one core of its allowed set;
+    return the previous set. Evaluator and controller then share a core: they never run at once,
+    and a round trip on one core costs a few microseconds instead of tens across cores."""
+    if not hasattr(os, "sched_setaffinity"):
+        return None
+    allowed = sorted(os.sched_getaffinity(0))
+    os.sched_setaffinity(0, {allowed[slot % len(allowed)]})
+    return set(allowed)
 
 
 # ---------------------------------------------------------------------------------- records
@@ -293,14 +224,10 @@ def validate_record(record: dict) -> None:
 
 def build_record(*, label: str, controller_file: str, action_mode: str, tasks: list[TaskSpec], rows: list[dict],
                  started_at: str, wall_time_s: float, workers: int, command: str, checkpoints: list[dict],
-                 commit: str) -> dict:
+                 commit: str, isolation: dict | None = None, seed_set: dict | None = None) -> dict:
     units = {t.terrain: t.unit for t in tasks}
     headroom = {(t.terrain, t.level): t.headroom for t in tasks}
-    episode_fields = ("terrain", "level", "index", "seed", "success", "end_reason", "steps", "sim_time_s",
-                      "progress_m", "time_to_goal_s", "mean_forward_speed_m_per_s", "max_abs_y_m", "roll_rms_deg",
-                      "pitch_rms_deg", "cost_of_transport")
-    episodes = sorted(({k: r[k] for k in episode_fields} for r in rows),
-                      key=lambda r: (r["terrain"], r["level"], r["index"]))
+    episodes = episode_record_rows(rows)
     levels = summarize_levels(episodes, units, headroom)
     record = {
         "schema_version": 1,
@@ -311,10 +238,12 @@ def build_record(*, label: str, controller_file: str, action_mode: str, tasks: l
                        "checkpoints": checkpoints},
         "provenance": {"hexbench_version": hexbench.__version__, "git_commit": commit, "command": command,
                        "machine": machine_info(), "started_at": started_at, "wall_time_s": wall_time_s,
-                       "workers": workers},
+                       "workers": workers, "isolation": isolation or {"mode": "unknown", "sandboxed": False},
+                       "seed_set": seed_set or {"kind": "public"}},
         "levels": levels,
         "terrains": summarize_terrains(levels),
         "episodes": episodes,
+        "episodes_digest": episodes_digest(episodes),
     }
     validate_record(record)
     return record
@@ -337,12 +266,6 @@ def run_time(timings) -> tuple[str, float]:
     return min(starts.values()), sum(latest.values())
 
 
-def _atomic_write_text(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
-
-
 # -------------------------------------------------------------------------------- the run
 @dataclass
 class RunResult:
@@ -351,134 +274,230 @@ class RunResult:
     error: str | None = None
 
 
-def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], first_ctrl) -> dict[str, list[dict]]:
+def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: str, limits) -> dict[str, list[dict]]:
     """Per terrain, path and sha256 of every weights file the controller loads for it.
 
     A controller lists them in an optional `checkpoint_paths` attribute (the trained baselines
-    do); one controller per terrain is built here, since baselines load per-terrain weights.
+    do; the sandbox accepts only files in the controller's folder); one controller per terrain is
+    built here, since baselines load per-terrain weights. Paths are shown relative to the
+    controller's folder's parent when they lie under the working directory, else absolute.
     """
-    ctrls = {tasks[0].terrain: first_ctrl}
-    for task in tasks:
-        if task.terrain not in ctrls:
-            ctrls[task.terrain] = make_controller(controller_file, task)
     used: dict[str, list[dict]] = {}
-    for terrain, ctrl in ctrls.items():
+    for task in {t.terrain: t for t in reversed(tasks)}.values():
+        ctrl = sandbox.controller_for(controller_file, task, isolation, limits)
         files = {}
-        for path in getattr(ctrl, "checkpoint_paths", []) or []:
+        for path in ctrl.checkpoint_paths:
             path = Path(path).resolve()
             try:
                 shown = str(path.relative_to(Path.cwd()))
             except ValueError:
                 shown = str(path)
             files[shown] = {"path": shown, "sha256": file_sha256(path)}
-        used[terrain] = [files[k] for k in sorted(files)]
+        used[task.terrain] = [files[k] for k in sorted(files)]
     return used
+
+
+@dataclass
+class _Journal:
+    """OUT/.journal/: one entry per finished episode, written by the evaluator alone."""
+
+    folder: Path
+    out: Path
+    controller_sha256: str
+    weights: dict[str, list[dict]]
+    seed_set: dict
+    invocation: str
+    started_at: str
+    t0: float
+    written: list[Path] = field(default_factory=list)
+
+    def path(self, job: EpisodeJob) -> Path:
+        return self.folder / f"{job.episode_id}.json"
+
+    def resumable(self, job: EpisodeJob, record: bool, max_steps: int | None) -> tuple[dict, tuple] | None:
+        """A journaled row for this job if it was made by the same controller, weights and seed set
+        and its action log replays into it exactly; else None (the episode runs again)."""
+        f = self.path(job)
+        if not f.is_file():
+            return None
+        try:
+            entry = json.loads(f.read_text())
+            row = entry["row"]
+            same = entry.get("controller_sha256") == self.controller_sha256 \
+                and entry.get("protocol") == job.task.protocol and entry.get("seed_set") == self.seed_set \
+                and sorted(w["sha256"] for w in entry.get("weights", [])) \
+                == sorted(w["sha256"] for w in self.weights[job.task.terrain]) \
+                and row["seed"] == job.seed and row["index"] == job.index and (not record or "mcap_path" in row)
+            if not same:
+                return None
+            replayed = replay_row(job.task, row, self.out / "episodes", max_steps)
+        except (ValueError, KeyError, TypeError, HexbenchError):
+            return None
+        if first_row_difference(row, replayed) is not None:
+            return None
+        return row, (entry["invocation"], entry["invocation_started_at"], entry["elapsed_s"])
+
+    def add(self, job: EpisodeJob, row: dict) -> float:
+        elapsed_s = time.perf_counter() - self.t0
+        f = self.path(job)
+        write_text_atomic(f, json.dumps({"controller_sha256": self.controller_sha256, "protocol": job.task.protocol,
+                                         "seed_set": self.seed_set, "weights": self.weights[job.task.terrain],
+                                         "invocation": self.invocation, "invocation_started_at": self.started_at,
+                                         "elapsed_s": elapsed_s, "row": row}))
+        self.written.append(f)
+        for key in ("action_log_path", "mcap_path", "rrd_path"):
+            if row.get(key):
+                self.written.append(self.out / "episodes" / row[key])
+        return elapsed_s
+
+
+def _prepare_out(out: Path) -> bool:
+    """Make OUT and OUT/.journal (owner-only); True if OUT was created by this call. One OutputError line
+    for a read-only folder, a file in the way or a name too long."""
+    try:
+        created = not out.exists()
+        is_file = out.exists() and not out.is_dir()
+    except OSError as e:  # e.g. a name too long for the file system
+        raise OutputError(f"{out}: cannot be used as the output folder ({os_reason(e)})") from None
+    if is_file:
+        raise OutputError(f"{out}: exists and is not a folder; choose another --out")
+    make_folder(out / ".journal")
+    make_folder(out / "episodes")
+    try:
+        (out / ".journal").chmod(0o700)
+        probe = out / f".write-probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise OutputError(f"{out}: cannot be written ({os_reason(e)})") from None
+    return created
+
+
+def _remove_written(paths: list[Path], out: Path, created_out: bool) -> None:
+    for f in paths:
+        try:
+            f.unlink(missing_ok=True)
+        except OSError:
+            pass
+    if created_out:
+        shutil.rmtree(out, ignore_errors=True)
 
 
 def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | Path, *, episodes: int | None = None,
              workers: int = 1, record: bool = True, label: str | None = None, progress: bool = True,
-             command: str | None = None) -> RunResult:
+             command: str | None = None, isolation: str = "auto", seed_set: SeedSet = SeedSet(),
+             make_timeout_s: float = sandbox.DEFAULT_LIMITS.make_timeout_s, max_steps: int | None = None) -> RunResult:
     """Evaluate one controller file on `tasks`; see the module docstring."""
     controller_file = str(controller_file)
     out = Path(out_dir)
     label = label or Path(controller_file).stem
     command = command or " ".join(["hexbench"] + sys.argv[1:])
-    # Load once here: a file that fails to import or build fails before any worker starts.
-    ctrl = make_controller(controller_file, tasks[0])
-    action_mode = ctrl.action_mode
-    weights = _weights_by_terrain(controller_file, tasks, ctrl)
+    mode = sandbox.resolve_isolation(isolation)
+    limits = sandbox.Limits(make_timeout_s=make_timeout_s)
+    if not Path(controller_file).is_file():
+        raise ControllerError(f"{controller_file}: no such controller file")
+    created_out = _prepare_out(out)
+    written: list[Path] = []
+    try:
+        return _evaluate(controller_file, tasks, out, episodes, workers, record, label, progress, command, mode, limits,
+                         seed_set, max_steps, written)
+    except HexbenchError as e:
+        _remove_written(written, out, created_out)
+        return RunResult(None, out, str(e))
+    finally:
+        sandbox.close_all()
+
+
+def _evaluate(controller_file, tasks, out, episodes, workers, record, label, progress, command, mode, limits, seed_set,
+              max_steps, written) -> RunResult:
+    # Built once here: a file that fails to import or build fails before any worker starts.
+    weights = _weights_by_terrain(controller_file, tasks, mode, limits)
+    action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits).action_mode
+    if workers > 1:
+        sandbox.close_all()  # the workers start their own controller processes
     checkpoints = sorted({w["path"]: w for ws in weights.values() for w in ws}.values(), key=lambda w: w["path"])
-    weight_shas = {terrain: sorted(w["sha256"] for w in ws) for terrain, ws in weights.items()}
-    sha = file_sha256(controller_file)
-    created_out = not out.exists()
-    journal = out / ".journal"
-    journal.mkdir(parents=True, exist_ok=True)
+    secret = run_secret(out / ".journal")
+    started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    journal = _Journal(out / ".journal", out, file_sha256(controller_file), weights, seed_set.record(),
+                       f"{started_at}/{os.getpid()}", started_at, time.perf_counter(), written)
     record_dir = str(out / "episodes") if record else None
-    jobs = [EpisodeJob(controller_file, t, i, s, record_dir)
-            for t in tasks for i, s in enumerate(t.seeds(episodes))]
+    jobs = [EpisodeJob(controller_file, t, i, s, record_dir, max_steps=max_steps, log_dir=str(out / "episodes"),
+                       isolation=mode, secret_hex=secret.hex(), make_timeout_s=limits.make_timeout_s)
+            for t in tasks for i, s in enumerate(seed_set.seeds(t, episodes))]
     done: dict[str, dict] = {}
     timing: dict[str, tuple[str, str, float]] = {}  # episode id -> (invocation, its start, elapsed [s] at journaling)
     for job in jobs:
-        f = journal / f"{job.episode_id}.json"
-        if f.exists():
-            entry = json.loads(f.read_text())
-            # resumed only if made by the same controller file with the same weights for its terrain
-            if entry.get("controller_sha256") == sha and entry.get("protocol") == job.task.protocol \
-                    and sorted(w["sha256"] for w in entry.get("weights", [])) == weight_shas[job.task.terrain] \
-                    and entry["row"]["seed"] == job.seed and (not record or "mcap_path" in entry["row"]):
-                done[job.episode_id] = entry["row"]
-                if "invocation" in entry:  # journals written before invocations were kept have no timing
-                    timing[job.episode_id] = (entry["invocation"], entry["invocation_started_at"], entry["elapsed_s"])
+        resumed = journal.resumable(job, record, max_steps)
+        if resumed is not None:
+            done[job.episode_id], timing[job.episode_id] = resumed
     todo = [j for j in jobs if j.episode_id not in done]
-    written: list[Path] = []
-    started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    invocation = f"{started_at}/{os.getpid()}"
     commit = git_commit()  # the code that runs, taken before the first episode
-    t0 = time.perf_counter()
 
-    def _journal(job: EpisodeJob, row: dict) -> None:
-        f = journal / f"{job.episode_id}.json"
-        elapsed_s = time.perf_counter() - t0
-        _atomic_write_text(f, json.dumps({"controller_sha256": sha, "protocol": job.task.protocol,
-                                          "weights": weights[job.task.terrain], "invocation": invocation,
-                                          "invocation_started_at": started_at, "elapsed_s": elapsed_s, "row": row}))
-        written.append(f)
+    def finished(job: EpisodeJob, row: dict) -> None:
+        elapsed_s = journal.add(job, row)
         done[job.episode_id] = row
-        timing[job.episode_id] = (invocation, started_at, elapsed_s)
+        timing[job.episode_id] = (journal.invocation, started_at, elapsed_s)
 
-    error = None
-    try:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-
-        with Progress(TextColumn(f"[bold]{label}[/]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      TimeRemainingColumn(), disable=not progress, transient=False) as bar:
-            task_bar = bar.add_task("episodes", total=len(jobs), completed=len(jobs) - len(todo))
-            if workers <= 1:
-                for job in todo:
-                    _journal(job, run_episode(job))
-                    bar.advance(task_bar)
-            else:
-                with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
-                                         initializer=_worker_init, initargs=(os.getpid(),)) as pool:
-                    futures = {pool.submit(run_episode, job): job for job in todo}
-                    pending = set(futures)
-                    while pending:
-                        finished, pending = wait(pending, return_when=FIRST_COMPLETED)
-                        for fut in finished:
-                            exc = fut.exception()
-                            if exc is not None:
-                                for p in pending:
-                                    p.cancel()
-                                raise exc
-                            _journal(futures[fut], fut.result())
-                            bar.advance(task_bar)
-    except ControllerError as e:
-        error = str(e)
-    except KeyboardInterrupt:
-        raise
-    if error is not None:
-        for f in written:
-            f.unlink(missing_ok=True)
-        if record_dir is not None:
-            for job in todo:
-                for suffix in (".mcap", ".rrd"):
-                    (Path(record_dir) / f"{job.episode_id}{suffix}").unlink(missing_ok=True)
-        if created_out:
-            shutil.rmtree(out, ignore_errors=True)
-        return RunResult(None, out, error)
-
+    _play_all(todo, len(jobs), workers, label, progress, finished)
     rows = [done[j.episode_id] for j in jobs]
-    run_started_at, wall_time_s = run_time([*timing.values(), (invocation, started_at, time.perf_counter() - t0)])
+    run_started_at, wall_time_s = run_time([*timing.values(), (journal.invocation, started_at,
+                                                               time.perf_counter() - journal.t0)])
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
-                       started_at=run_started_at, wall_time_s=wall_time_s, workers=workers,
-                       command=command, checkpoints=checkpoints, commit=commit)
+                       started_at=run_started_at, wall_time_s=wall_time_s, workers=workers, command=command,
+                       checkpoints=checkpoints, commit=commit, isolation=sandbox.isolation_record(mode, limits, controller_file),
+                       seed_set=seed_set.record())
     import pandas as pd
 
     ordered = sorted(jobs, key=lambda j: (j.task.terrain, j.task.level, j.index))
     table = pd.DataFrame([{"episode_id": j.episode_id, **done[j.episode_id]} for j in ordered])
-    tmp = out / ".episodes.parquet.tmp"
-    table.to_parquet(tmp, index=False)
-    os.replace(tmp, out / "episodes.parquet")
-    _atomic_write_text(out / "result.json", json.dumps(rec, indent=1, sort_keys=False) + "\n")
+    tmp = out / f".episodes.parquet.{os.getpid()}.tmp"
+    try:
+        table.to_parquet(tmp, index=False)
+        os.replace(tmp, out / "episodes.parquet")
+    except OSError as e:
+        tmp.unlink(missing_ok=True)
+        raise OutputError(f"{out / 'episodes.parquet'}: cannot be written ({os_reason(e)})") from None
+    write_text_atomic(out / "result.json", json.dumps(rec, indent=1, sort_keys=False) + "\n")
     return RunResult(rec, out)
 
+
+def _play_all(todo: list[EpisodeJob], total: int, workers: int, label: str, progress: bool, finished) -> None:
+    """Play every job (in this process, or over a pool of `workers` pinned processes), calling
+    `finished(job, row)` as each ends; the first ControllerError stops the rest and propagates."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+
+    with Progress(TextColumn(f"[bold]{label}[/]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  TimeRemainingColumn(), disable=not progress, transient=False) as bar:
+        task_bar = bar.add_task("episodes", total=total, completed=total - len(todo))
+        if workers <= 1:
+            previous = pin_to_core(0)
+            try:
+                for job in todo:
+                    finished(job, run_episode(job))
+                    bar.advance(task_bar)
+            finally:
+                if previous is not None:
+                    os.sched_setaffinity(0, previous)
+            return
+        ctx = get_context("spawn")
+        next_core = ctx.Value("i", 0)
+        with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init,
+                                 initargs=(os.getpid(), next_core)) as pool:
+            futures = {pool.submit(run_episode, job): job for job in todo}
+            pending = set(futures)
+            try:
+                while pending:
+                    done, pending = wait(pending, return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        exc = fut.exception()
+                        if exc is not None:
+                            if not isinstance(exc, HexbenchError):
+                                exc = ControllerError(f"{futures[fut].controller_file}: its episode "
+                                                      f"{futures[fut].episode_id} failed in a worker: "
+                                                      f"{type(exc).__name__}: {exc}")
+                            raise exc
+                        finished(futures[fut], fut.result())
+                        bar.advance(task_bar)
+            finally:
+                for p in pending:
+                    p.cancel()

@@ -48,6 +48,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from hexbench import scoring
+from hexbench.errors import HexbenchError
 from hexbench.tasks import DEFAULT_PROTOCOL, Suite, episode_seed, format_level, load_suite
 
 SCHEMA_PATH = Path(__file__).parent / "schemas" / "result.schema.json"
@@ -62,7 +63,7 @@ REL_TOLERANCE = 1e-9
 ABS_TOLERANCE = 1e-12
 
 
-class RecordError(ValueError):
+class RecordError(HexbenchError, ValueError):
     """A record was refused; the message is one line naming the file and the problem."""
 
 
@@ -172,9 +173,9 @@ def _check_provenance(record: dict, where: str) -> None:
         raise RecordError(f"{where}: controller.sha256 is empty; a measured record must carry its controller's sha256")
 
 
-def _check_episodes(record: dict, suite: Suite, where: str, tasks: tuple | None = None) -> None:
+def _check_episodes(record: dict, suite: Suite, where: str, tasks: tuple | None = None, keyed: bool = False) -> None:
     """Every seed of every level of `tasks` (default: the full run) present exactly once; nothing else;
-    outcomes coherent."""
+    outcomes coherent. A keyed seed set's seeds were checked against its key at admission."""
     tasks = suite.tasks if tasks is None else tasks
     expected: dict[tuple[str, str], list[int]] = {
         (t.terrain, format_level(t.level)): t.seeds() for t in tasks
@@ -197,7 +198,7 @@ def _check_episodes(record: dict, suite: Suite, where: str, tasks: tuple | None 
         if ep["index"] >= len(seeds):
             raise RecordError(f"{where}: {name}: index out of range; protocol {suite.protocol} has "
                               f"{len(seeds)} episodes per level (indices 0..{len(seeds) - 1})")
-        if ep["seed"] != seeds[ep["index"]]:
+        if not keyed and ep["seed"] != seeds[ep["index"]]:
             raise RecordError(f"{where}: {name}: seed {ep['seed']} is not the protocol seed {seeds[ep['index']]}")
         if (*key, ep["index"]) in seen:
             raise RecordError(f"{where}: {name}: duplicate of episodes[{seen[(*key, ep['index'])]}]")
@@ -238,6 +239,36 @@ def _compare_summaries(stored: list[dict], recomputed: list[dict], key_fields: t
                                   f"{_show(s[name])} in the record but {_show(fresh)} recomputed from the episodes")
 
 
+# ------------------------------------------------------------------------------ trust tiers
+TIER_SELF_REPORTED = "self-reported"
+TIER_REPLAYED = "sandboxed + replayed"
+TIER_HIDDEN = "sandboxed + replayed + hidden seeds"
+TIER_ORDER = {TIER_SELF_REPORTED: 0, TIER_REPLAYED: 1, TIER_HIDDEN: 2}
+
+
+def record_tier(record: dict, where: str) -> str:
+    """How far a measured record is proven. Replayed tiers need the admission block that
+    `hexbench leaderboard add RUN_DIR` writes after replaying the run, bound to the record's rows by
+    their digest; a record made in-process (--isolation none) is refused outright."""
+    from hexbench.records import episodes_digest
+
+    isolation = record["provenance"].get("isolation") or {}
+    if isolation.get("mode") == "none":
+        raise RecordError(f"{where}: was made with --isolation none (the controller ran inside the evaluator); "
+                          f"the leaderboard takes sandboxed runs only")
+    admission = record.get("admission")
+    if not admission:
+        return TIER_SELF_REPORTED
+    digest = record.get("episodes_digest")
+    if admission.get("episodes_digest") != digest or digest != episodes_digest(record["episodes"]):
+        raise RecordError(f"{where}: its episode rows changed after admission (episodes digest differs); "
+                          f"re-admit the run with `hexbench leaderboard add RUN_DIR`")
+    if not isolation.get("sandboxed"):
+        return TIER_SELF_REPORTED
+    keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed"
+    return TIER_HIDDEN if keyed else TIER_REPLAYED
+
+
 def measured_row(record: dict, where: str, course: bool = False) -> Row:
     """Validate a measured record (see module docstring) and return its row; RecordError if refused.
 
@@ -254,7 +285,8 @@ def measured_row(record: dict, where: str, course: bool = False) -> Row:
         tasks = tuple(t for t in suite.extra_tasks if t.terrain in covered) or suite.extra_tasks
     else:
         tasks = suite.tasks
-    _check_episodes(record, suite, where, tasks)
+    tier = record_tier(record, where)
+    _check_episodes(record, suite, where, tasks, keyed=tier.endswith("hidden seeds"))
     units = {t.terrain: t.unit for t in tasks}
     headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     # Episode levels are normalised to the suite's float so the headroom lookup cannot miss.
@@ -271,6 +303,7 @@ def measured_row(record: dict, where: str, course: bool = False) -> Row:
         "checkpoint_files": [(c["path"], c["sha256"]) for c in ctrl.get("checkpoints", [])], "git_commit": prov["git_commit"],
         "command": prov["command"], "hexbench_version": prov["hexbench_version"], "started_at": prov["started_at"],
         "wall_time_s": prov["wall_time_s"], "workers": prov["workers"], "episodes": len(record["episodes"]),
+        "tier": tier, "admission": record.get("admission"),
     }
     return Row(label=record["label"], kind="measured", setting="simulation", source=Path(where).name,
                levels=tuple(levels), terrains=tuple(terrains), details=details)
@@ -542,11 +575,64 @@ RANKING_RULE = (
 
 
 # ---------------------------------------------------------------------------------- README
+# Strings taken from a record (labels, file names, paths, commands, citations, ...) come from
+# submitters. In Markdown they go through _md (text) or _md_code (a code span), so they show as the
+# literal text: nothing in them can make HTML (GitHub passes inline HTML through), links, emphasis,
+# code spans, block structure or extra table cells. Plain strings ("ppo_cpg", "PPO-CPG (paper)")
+# come out unchanged.
+_MD_CONTROL = re.compile(r"[\x00-\x1f\x7f-\x9f\u2028\u2029]")  # newlines would end a table row or paragraph
+_MD_BACKSLASHED = re.compile(r"[\\`*\[\]~$]")  # escapes, code spans, emphasis, links/images, strikethrough, math
+# `_` makes emphasis only next to a non-alphanumeric character; inside a word ("ppo_cpg") it cannot
+_MD_UNDERSCORE = re.compile(r"(?<![^\W_])_|_(?![^\W_])")
+_MD_BLOCK_START = re.compile(r"^(\s*)(?:([#+=-])|(\d+)([.)]))")  # headings, lists, setext/thematic breaks
+
+
+def _one_line(text) -> str:
+    """`text` on one line: control characters (newlines included) become spaces (Markdown cells,
+    plot legends)."""
+    return _MD_CONTROL.sub(" ", str(text))
+
+
+def _md(text, block: bool = False) -> str:
+    """A record string as Markdown text that renders as exactly that text.
+
+    block=True where the text starts a block (a paragraph or list item): a leading `#`, `-`, `+`, `=`
+    or `1.` is escaped too, so it cannot become a heading, list or rule. In a table, `_md_table`
+    escapes `|`.
+    """
+    s = _MD_BACKSLASHED.sub(lambda m: "\\" + m.group(0), _one_line(text))
+    s = s.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+    s = _MD_UNDERSCORE.sub(r"\\_", s)
+    if block:
+        s = _MD_BLOCK_START.sub(lambda m: m.group(1) + (f"\\{m.group(2)}" if m.group(2) else
+                                                        f"{m.group(3)}\\{m.group(4)}"), s, count=1)
+    return s
+
+
+def _md_code(text) -> str:
+    """A record string as a Markdown code span: literal text (HTML and Markdown are not parsed in it);
+    the fence is longer than any run of backticks inside. In a table, `_md_table` escapes `|` (GFM
+    removes that backslash inside code spans too). A string with `<` is written as escaped text
+    (`_md`) instead, so the file never holds a raw tag, even for a tool that does not parse Markdown."""
+    s = _one_line(text)
+    if "<" in s:
+        return _md(s)
+    fence = "`" * (max((len(run) for run in re.findall(r"`+", s)), default=0) + 1)
+    pad = " " if s.startswith("`") or s.endswith("`") or (s.startswith(" ") and s.endswith(" ") and s.strip()) else ""
+    return f"{fence}{pad}{s}{pad}{fence}"
+
+
+def _md_table_cell(cell: str) -> str:
+    return _one_line(cell).replace("|", "\\|")
+
+
 def _md_table(header: list[str], rows: list[list[str]], align: list[str] | None = None) -> str:
+    """A GFM table; cells are Markdown (record strings already through _md / _md_code), `|` in them is
+    escaped so it never splits a cell."""
     align = align or ["l"] + ["r"] * (len(header) - 1)
     sep = ["---:" if a == "r" else ":---:" if a == "c" else "---" for a in align]
-    lines = ["| " + " | ".join(header) + " |", "| " + " | ".join(sep) + " |"]
-    lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
+    lines = ["| " + " | ".join(_md_table_cell(c) for c in header) + " |", "| " + " | ".join(sep) + " |"]
+    lines += ["| " + " | ".join(_md_table_cell(c) for c in row) + " |" for row in rows]
     return "\n".join(lines)
 
 
@@ -589,7 +675,7 @@ def render_readme(board: Board) -> str:
         rows = []
         for r in board.measured:
             m = overall_metrics(r)
-            cells = [str(board.overall_ranks[r.label]), r.label, fmt_budget(board.training.get(r.label))]
+            cells = [str(board.overall_ranks[r.label]), _md(r.label), fmt_budget(board.training.get(r.label))]
             for t in suite.terrains:
                 s = r.terrain(t)
                 cells += [fmt_level(s["hardest_level_passed"], s["unit"]), fmt_num(s["auc"])]
@@ -609,14 +695,14 @@ def render_readme(board: Board) -> str:
         rows = []
         for r in sorted(board.measured, key=lambda r: (ranks[r.label], r.label)):
             s = r.terrain(terrain)
-            rows.append([str(ranks[r.label]), r.label, fmt_level(s["hardest_level_passed"], unit),
+            rows.append([str(ranks[r.label]), _md(r.label), fmt_level(s["hardest_level_passed"], unit),
                          fmt_num(s["auc"]), fmt_num(s["headroom_auc"]),
                          fmt_num(s["mean_forward_speed_m_per_s"], 3), fmt_num(s.get("mean_roll_rms_deg"), 1),
                          fmt_num(s.get("mean_pitch_rms_deg"), 1), str(s["episodes"])])
         for r in board.reported:  # beside the measured rows, never ranked
             s = r.terrain(terrain)
             if s is not None:
-                rows.append(["ref.", reported_name(r), fmt_level(s["hardest_level_passed"], unit), fmt_num(s["auc"]),
+                rows.append(["ref.", _md(reported_name(r)), fmt_level(s["hardest_level_passed"], unit), fmt_num(s["auc"]),
                              "–", "–", "–", "–", f"{s['episodes']} (paper's trials)"])
         if rows:
             out.append("Ranked summary (measured entries; `ref.` rows are the paper's, unranked; AUC of a reference "
@@ -626,15 +712,15 @@ def render_readme(board: Board) -> str:
         out.append(f"Success rate per level, laid out like paper Table 4 (level in {unit}); measured entries with "
                    "the 95% Wilson interval in brackets.\n")
         header = ["Controller"] + [format_level(v) for v in paper_levels]
-        rows = [[r.label] + [_md_cell(r.level(terrain, v), True) for v in paper_levels] for r in board.measured]
-        rows += [[reported_name(r)] + [_md_cell(r.level(terrain, v), False) for v in paper_levels]
+        rows = [[_md(r.label)] + [_md_cell(r.level(terrain, v), True) for v in paper_levels] for r in board.measured]
+        rows += [[_md(reported_name(r))] + [_md_cell(r.level(terrain, v), False) for v in paper_levels]
                  for r in board.reported if r.setting == "simulation" and r.terrain(terrain)]
         out.append(_md_table(header, rows) + "\n")
         extra = [v for v in suite.levels(terrain) if v not in paper_levels]
         if extra and board.measured:
             out.append("Headroom levels (beyond the paper, scored separately):\n")
             header = ["Controller"] + [format_level(v) for v in extra]
-            rows = [[r.label] + [_md_cell(r.level(terrain, v), True) for v in extra] for r in board.measured]
+            rows = [[_md(r.label)] + [_md_cell(r.level(terrain, v), True) for v in extra] for r in board.measured]
             out.append(_md_table(header, rows) + "\n")
     real = [r for r in board.reported if r.setting == "real robot"]
     if real:
@@ -642,26 +728,26 @@ def render_readme(board: Board) -> str:
         for r in real:
             for t in r.terrains:
                 levels = [lv for lv in r.levels if lv["terrain"] == t["terrain"]]
-                header = [f"{r.label}: {TERRAIN_TITLES.get(t['terrain'], t['terrain'])} [{t['unit']}]"]
+                header = [f"{_md(r.label)}: {_md(TERRAIN_TITLES.get(t['terrain'], t['terrain']))} [{_md(t['unit'])}]"]
                 header += [format_level(lv["level"]) for lv in levels]
                 out.append(_md_table(header, [["success rate"] + [pct(lv["success_rate"]) for lv in levels]]) + "\n")
     if board.reported_notes:
         out.append("## About the paper reference\n")
         for citation, note in board.reported_notes:
-            out.append(f"{citation}\n\n{note}\n")
+            out.append(f"{_md(citation, block=True)}\n\n{_md(note, block=True)}\n")
     out.append("## Records\n")
     if board.measured:
         header = ["Controller", "Record", "Controller file", "sha256", "Action mode", "Training budget",
                   "Shipped checkpoints at [env steps]", "git commit", "Episodes", "Wall time [s]", "Command"]
-        rows = [[r.label, r.source, r.details["controller_file"], r.details["controller_sha256"][:12],
-                 r.details["action_mode"], fmt_budget(board.training.get(r.label)),
-                 _fmt_checkpoint_steps(board.training.get(r.label)), str(r.details["git_commit"])[:12],
-                 str(r.details["episodes"]), f"{r.details['wall_time_s']:.0f}", f"`{r.details['command']}`"]
+        rows = [[_md(r.label), _md(r.source), _md(r.details["controller_file"]), _md(r.details["controller_sha256"][:12]),
+                 _md(r.details["action_mode"]), fmt_budget(board.training.get(r.label)),
+                 _fmt_checkpoint_steps(board.training.get(r.label)), _md(str(r.details["git_commit"])[:12]),
+                 str(r.details["episodes"]), f"{r.details['wall_time_s']:.0f}", _md_code(r.details["command"])]
                 for r in board.measured]
         out.append(_md_table(header, rows, ["l"] * len(header)) + "\n")
     sources = sorted({r.source for r in board.reported})
     if sources:
-        out.append(f"Paper reference: {', '.join(sources)} (kind `reported`: {REPORTED_NOTE}).\n")
+        out.append(f"Paper reference: {', '.join(_md(s) for s in sources)} (kind `reported`: {REPORTED_NOTE}).\n")
     out.append("## Definitions\n")
     out.append("- **Success**: the base advances 2.5 m along +x within the step limit, never more than 0.8 m off in "
                "y, without falling (protocol details in `tasks/protocol_v1.toml`). 20 seeded episodes per level.\n"
@@ -694,6 +780,17 @@ def _csv_value(v) -> str:
     return str(v)
 
 
+# A spreadsheet evaluates a cell starting with one of these as a formula (OWASP "CSV injection").
+CSV_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
+def _csv_text(v) -> str:
+    """A free-text cell from a record (label, file name): a leading apostrophe where the text would
+    start a spreadsheet formula, so it shows as text. Never for numbers (a negative number stays one)."""
+    s = _csv_value(v)
+    return "'" + s if s.startswith(CSV_FORMULA_START) else s
+
+
 def _csv_training(training: Training | None) -> tuple[str | None, str | None]:
     """Budget and checkpoint env steps as CSV cells: distinct values joined by ';', empty if unknown."""
     if training is None or not training.known:
@@ -710,8 +807,7 @@ def render_csv(board: Board) -> str:
         for lv in r.levels:
             t = r.terrain(lv["terrain"])
             measured = r.kind == "measured"
-            writer.writerow([_csv_value(v) for v in (
-                r.kind, r.setting, r.label, r.source,
+            writer.writerow([r.kind, r.setting, _csv_text(r.label), _csv_text(r.source)] + [_csv_value(v) for v in (
                 board.overall_ranks[r.label] if measured else None,
                 board.terrain_ranks[lv["terrain"]][r.label] if measured else None,
                 lv["terrain"], lv["unit"], lv["level"], lv["headroom"], lv["episodes"], lv["successes"],
@@ -733,6 +829,13 @@ def measured_color(board: Board, label: str) -> str:
     """A fixed colour per measured controller (by overall order), shared by plots and tables."""
     labels = [r.label for r in board.measured]
     return MEASURED_COLORS[labels.index(label) % len(MEASURED_COLORS)]
+
+
+def _literal_legend_texts(legend) -> None:
+    """Legend entries are record labels: drawn as literal text, never parsed as mathtext (`$...$`).
+    matplotlib escapes text for SVG itself (`<`, `&`; `--` in the comments it writes)."""
+    for text in legend.get_texts():
+        text.set_parse_math(False)
 
 
 def plot_svg(board: Board, terrain: str) -> str:
@@ -765,7 +868,7 @@ def plot_svg(board: Board, terrain: str) -> str:
             color, style, marker = REPORTED_STYLES[i % len(REPORTED_STYLES)]
             pts = [lv for lv in r.levels if lv["terrain"] == terrain]
             (line,) = ax.plot([p["level"] for p in pts], [p["success_rate"] for p in pts], color=color, ls=style,
-                              lw=1.3, marker=marker, ms=4.5, mfc="white", mew=1.1, zorder=2, label=r.label)
+                              lw=1.3, marker=marker, ms=4.5, mfc="white", mew=1.1, zorder=2, label=_one_line(r.label))
             reported_handles.append(line)
         gaps = [b - a for a, b in zip(levels_all, levels_all[1:])]
         dodge = 0.08 * min(gaps) if gaps else 0.0  # side-by-side whiskers so intervals stay readable
@@ -777,7 +880,7 @@ def plot_svg(board: Board, terrain: str) -> str:
             y = [p["success_rate"] for p in pts]
             yerr = [[v - p["ci95_low"] for v, p in zip(y, pts)], [p["ci95_high"] - v for v, p in zip(y, pts)]]
             container = ax.errorbar(x, y, yerr=yerr, color=color, lw=2.0, marker="o", ms=4.5, zorder=4,
-                                    elinewidth=1.0, capsize=2.0, capthick=1.0, ecolor=color, label=r.label)
+                                    elinewidth=1.0, capsize=2.0, capthick=1.0, ecolor=color, label=_one_line(r.label))
             for bar in container[2]:
                 bar.set_alpha(0.55)
             measured_handles.append(container)
@@ -795,22 +898,32 @@ def plot_svg(board: Board, terrain: str) -> str:
             legend = fig.legend(handles=measured_handles, title="measured here\n(whiskers: 95% Wilson interval)",
                                 bbox_to_anchor=(0.655, top), **legend_style)
             legend.get_title().set_fontweight("bold")
+            _literal_legend_texts(legend)
             top -= 0.062 * (len(measured_handles) + 2) + 0.05
         if reported_handles:
             legend = fig.legend(handles=reported_handles, title=f"paper reference\n({REPORTED_NOTE})",
                                 bbox_to_anchor=(0.655, top), **legend_style)
             legend.get_title().set_fontweight("bold")
             legend.get_title().set_color("#6b5b2e")
+            _literal_legend_texts(legend)
         buf = io.StringIO()
         fig.savefig(buf, format="svg", metadata={"Date": None, "Creator": None, "Format": None, "Type": None})
     svg = buf.getvalue()
     svg = svg[svg.index("<svg"):]  # drop the XML declaration and DOCTYPE for inlining in HTML
     svg = re.sub(r'<svg([^>]*?) width="[^"]+" height="[^"]+"', r'<svg\1', svg, count=1)
     # Three plots share one page: prefix every element id (and its references) with the terrain.
-    ids = set(re.findall(r'\bid="([^"]+)"', svg)) - {f"plot-{terrain}"}
-    svg = re.sub(r'\bid="([^"]+)"', lambda m: f'id="{terrain}-{m.group(1)}"' if m.group(1) in ids else m.group(0), svg)
-    svg = re.sub(r'(url\(#|href="#)([^)"]+)', lambda m: f"{m.group(1)}{terrain}-{m.group(2)}"
-                 if m.group(2) in ids else m.group(0), svg)
+    # Inside tags only: text (legend entries are record labels) is left exactly as it is; matplotlib
+    # escapes `<` and `>` in it, so no text is taken for a tag.
+    tag_re = re.compile(r"<(?!!--)[^<>]*>")
+    ids = {i for tag in tag_re.findall(svg) for i in re.findall(r'\bid="([^"]+)"', tag)} - {f"plot-{terrain}"}
+
+    def prefix_ids(tag: re.Match) -> str:
+        t = re.sub(r'\bid="([^"]+)"', lambda m: f'id="{terrain}-{m.group(1)}"' if m.group(1) in ids else m.group(0),
+                   tag.group(0))
+        return re.sub(r'(url\(#|href="#)([^)"]+)', lambda m: f"{m.group(1)}{terrain}-{m.group(2)}"
+                      if m.group(2) in ids else m.group(0), t)
+
+    svg = tag_re.sub(prefix_ids, svg)
     svg = svg.replace("<svg", f'<svg role="img" aria-label="{TERRAIN_TITLES.get(terrain, terrain)}: success rate '
                       'versus level"', 1)
     return svg.strip() + "\n"
@@ -818,7 +931,15 @@ def plot_svg(board: Board, terrain: str) -> str:
 
 # ------------------------------------------------------------------------------------ HTML
 def _e(text) -> str:
+    """Text or an attribute value for the page (every string from a record goes through this)."""
     return html.escape(str(text), quote=True)
+
+
+def _raw_text(text: str) -> str:
+    """Contents of a <script> or <style> element: `</` escaped (`<\\/`, the same in JavaScript strings,
+    JSON and CSS), so nothing inside can close the element. The page inlines only its own assets there,
+    never record data."""
+    return text.replace("</", "<\\/")
 
 
 def _sort_attr(value) -> str:
@@ -951,7 +1072,7 @@ def render_html(board: Board) -> str:
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
            '<meta name="viewport" content="width=device-width, initial-scale=1">',
            f'<meta name="generator" content="{_e(generator_tag())}">', f"<title>{_e(title)}</title>",
-           "<style>", _asset("style.css").strip(), "</style>", "</head>", "<body>", "<main>"]
+           "<style>", _raw_text(_asset("style.css").strip()), "</style>", "</head>", "<body>", "<main>"]
     out.append(f'<header><h1>hexbench leaderboard <span class="proto">protocol {_e(board.protocol)}</span></h1>'
                f'<p class="lead">Hexapod locomotion on rough terrain, slopes and stairs: success over 20 seeded '
                f'episodes per difficulty level. {len(board.measured)} measured '
@@ -1002,7 +1123,7 @@ def render_html(board: Board) -> str:
                "(never edited by hand). Success: the base advances 2.5 m along +x without falling and without "
                "straying more than 0.8 m sideways. Summaries are recomputed from each record's per-episode rows. "
                "Every number is also in <code>leaderboard.csv</code>.</footer>")
-    out += ["</main>", "<script>", _asset("sortable.js").strip(), "</script>", "</body>", "</html>"]
+    out += ["</main>", "<script>", _raw_text(_asset("sortable.js").strip()), "</script>", "</body>", "</html>"]
     return "\n".join(out) + "\n"
 
 
@@ -1087,13 +1208,13 @@ def render_courses_readme(rows: list[Row], suite: Suite) -> str:
             continue
         header = ["Controller"] + [f"level {format_level(v)}" for v in levels] + [
             "Mean speed [m/s]", "Episodes", "Record", "Controller file", "git commit"]
-        table = [[r.label] + [_md_cell(r.level(terrain, v), True) for v in levels] + [
-            fmt_num(r.terrain(terrain)["mean_forward_speed_m_per_s"], 3), str(r.details["episodes"]), r.source,
-            r.details["controller_file"], str(r.details["git_commit"])[:12]] for r in course_rows]
+        table = [[_md(r.label)] + [_md_cell(r.level(terrain, v), True) for v in levels] + [
+            fmt_num(r.terrain(terrain)["mean_forward_speed_m_per_s"], 3), str(r.details["episodes"]), _md(r.source),
+            _md(r.details["controller_file"]), _md(str(r.details["git_commit"])[:12])] for r in course_rows]
         out.append(_md_table(header, table) + "\n")
         out.append("Commands:\n")
         for r in course_rows:
-            out.append(f"- {r.label}: `{r.details['command']}`")
+            out.append(f"- {_md(r.label, block=True)}: {_md_code(r.details['command'])}")
         out.append("")
     return "\n".join(out)
 
@@ -1132,10 +1253,49 @@ def slug(label: str) -> str:
     return s or "record"
 
 
+def _admission_source(source: Path) -> tuple[Path, Path | None]:
+    """(record path, run folder or None) of what `leaderboard add` was given."""
+    if source.is_dir():
+        return source / "result.json", source
+    if source.name == "result.json" and (source.parent / "episodes").is_dir():
+        return source, source.parent
+    return source, None
+
+
+def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None = None, workers: int = 1,
+          seed_set=None, rng=None, progress: bool = False) -> dict:
+    """Replay a measured run before it joins; return the record with its admission block. RecordError if refused."""
+    import hexbench
+    from hexbench.evaluate import git_commit
+    from hexbench.verify import verify_run
+
+    if run_dir is None:
+        raise RecordError(f"{where}: a measured record joins only with its run folder (its action logs), e.g. "
+                          f"`hexbench leaderboard add runs/NAME`; a record alone cannot be replayed")
+    isolation = record["provenance"].get("isolation") or {}
+    if not isolation.get("sandboxed"):
+        raise RecordError(f"{where}: was not made in a sandbox (isolation {isolation.get('mode', 'unknown')!r}); "
+                          f"re-run it with `hexbench run` (bubblewrap or process isolation)")
+    keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed"
+    if keyed and (seed_set is None or seed_set.key is None):
+        raise RecordError(f"{where}: has a keyed seed set; admission needs the key (--seed-key FILE) to check its seeds")
+    report = verify_run(run_dir, sample=sample, rng=rng, workers=workers, seed_set=seed_set, progress=progress)
+    if not report.ok:
+        raise RecordError(f"refused: {report.message}")
+    admitted = {k: v for k, v in record.items() if k != "admission"}
+    admitted["admission"] = {"verified_by": "replay of action logs", "episodes_replayed": report.episodes_replayed,
+                             "episodes_total": report.episodes_total, "episodes_digest": record["episodes_digest"],
+                             "hexbench_version": hexbench.__version__, "git_commit": git_commit()}
+    return admitted
+
+
 def add(result_path: str | Path, directory: str | Path = "leaderboard", replace: bool = False,
-        protocol: str = DEFAULT_PROTOCOL) -> Path:
-    """Validate a record and copy it into `directory` as <slug(label)>.json; RecordError if refused."""
-    result_path, directory = Path(result_path), Path(directory)
+        protocol: str = DEFAULT_PROTOCOL, *, sample: int | None = None, workers: int = 1, seed_set=None,
+        progress: bool = False) -> Path:
+    """Validate a record, replay its run (measured records), and copy it into `directory` as
+    <slug(label)>.json; RecordError if refused."""
+    result_path, run_dir = _admission_source(Path(result_path))
+    directory = Path(directory)
     record = read_record(result_path)
     if is_course_record(record):  # extra courses are scored apart, in their own folder
         rows = [measured_row(record, str(result_path), course=True)]
@@ -1169,6 +1329,29 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
             raise RecordError(f"{result_path}: label {clash[0]!r} is already used by {path}; choose another label")
     if dest.exists() and dest.resolve() != result_path.resolve() and not replace:
         raise RecordError(f"{dest} already exists; pass --replace to overwrite it")
+    if record["kind"] == "measured":
+        record = admit(record, run_dir, str(result_path), sample=sample, workers=workers, seed_set=seed_set,
+                       progress=progress)
+        if dest.exists():
+            _refuse_downgrade(dest, record, str(result_path))
     if dest.resolve() != result_path.resolve():
         _atomic_write_all({dest: json.dumps(record, indent=1) + "\n"})
     return dest
+
+
+def _refuse_downgrade(dest: Path, record: dict, where: str) -> None:
+    """--replace never puts a less proven record in place of a more proven one."""
+    try:
+        old = read_record(dest)
+        old_tier = record_tier(old, str(dest)) if old.get("kind") == "measured" else TIER_SELF_REPORTED
+    except RecordError:
+        return
+    new_tier = record_tier(record, where)
+    if TIER_ORDER[new_tier] < TIER_ORDER[old_tier]:
+        raise RecordError(f"{where}: is {new_tier}, {dest} is {old_tier}; --replace never puts a less proven record "
+                          f"in its place")
+    old_share = (old.get("admission") or {}).get("episodes_replayed", 0) / max(1, len(old.get("episodes", [])))
+    new_share = record["admission"]["episodes_replayed"] / max(1, len(record["episodes"]))
+    if new_tier == old_tier and new_share < old_share:
+        raise RecordError(f"{where}: replayed {new_share:.0%} of its episodes, {dest} {old_share:.0%}; --replace never "
+                          f"puts a less proven record in its place (admit it with fewer --sample or none)")

@@ -70,25 +70,18 @@ def _run_config(run: dict):
 
 
 def play_episode(policy, config, terrain: str, level: float, seed: int, between_levels: bool = False) -> EpisodeOutcome:
-    """One deterministic episode of `policy` under the protocol's rules at (terrain, level); with
-    `between_levels`, a level between suite levels plays under the next one's rules (Suite.task_between)."""
-    from hexbench.env import HexapodEnv
+    """One deterministic episode of `policy` under the protocol's rules at (terrain, level), through the
+    one episode loop (hexbench.rollout); with `between_levels`, a level between suite levels plays
+    under the next one's rules (Suite.task_between)."""
     from hexbench.policy import PolicyController
+    from hexbench.rollout import LocalActor, play
     from hexbench.tasks import load_suite
 
     suite = load_suite()
     task = suite.task_between(terrain, level) if between_levels else suite.task(terrain, level)
-    env = HexapodEnv(task.env_config(config.action_mode, residual_scale=config.residual_scale))
-    try:
-        controller = PolicyController(config.action_mode, policy)
-        obs, _ = env.reset(seed=seed)
-        controller.reset(seed)
-        while True:
-            obs, _, terminated, truncated, info = env.step(controller.act(obs))
-            if terminated or truncated:
-                return EpisodeOutcome(info["end_reason"] == "success", float(info["progress_m"]), info["end_reason"])
-    finally:
-        env.close()
+    actor = LocalActor(PolicyController(config.action_mode, policy))
+    row = play(task, seed, actor, where="policy", residual_scale=config.residual_scale).row
+    return EpisodeOutcome(row["success"], float(row["progress_m"]), row["end_reason"])
 
 
 def score_job(job: tuple) -> tuple[str, float, int, dict]:

@@ -8,3 +8,45 @@ REPO = Path(__file__).resolve().parent.parent
 @pytest.fixture
 def repo() -> Path:
     return REPO
+
+
+TINY_PROTOCOL = """# A one-level-per-terrain protocol for fast end-to-end tests (same rules as v1, short episodes).
+protocol = "v1"
+episodes_per_level = 2
+max_steps = 40
+goal_distance_m = 2.5
+max_lateral_deviation_m = 0.8
+fall_tilt_deg = 60.0
+stall_window_s = 20.0
+stall_min_progress_m = 0.05
+action_noise = false
+
+[terrains.rough]
+unit = "cm"
+levels = [3]
+headroom_levels = []
+
+[terrains.slopes]
+unit = "deg"
+levels = [6]
+headroom_levels = []
+
+[terrains.stairs]
+unit = "cm"
+levels = [2]
+headroom_levels = []
+"""
+
+
+@pytest.fixture
+def tiny_protocol(tmp_path_factory, monkeypatch):
+    """HEXBENCH_TASKS_DIR pointed at a tiny protocol v1 (one level per terrain, 2 episodes of 40 steps),
+    so a whole "full run" takes seconds; the suite cache is cleared on the way in and out."""
+    from hexbench.tasks import load_suite
+
+    folder = tmp_path_factory.mktemp("tiny_tasks")
+    (folder / "protocol_v1.toml").write_text(TINY_PROTOCOL)
+    monkeypatch.setenv("HEXBENCH_TASKS_DIR", str(folder))
+    load_suite.cache_clear()
+    yield folder
+    load_suite.cache_clear()

@@ -216,13 +216,16 @@ def test_a_controller_with_a_camera_sees_the_painted_terrain_on_schedule(tmp_pat
         "        return np.zeros(18, dtype=np.float32)\n"
         "def make_controller(task):\n"
         "    return Looker()\n")
-    from hexbench import evaluate as ev
+    from hexbench import sandbox
 
     task = load_suite("v1").task("mixed", 1)
-    job = EpisodeJob(str(ctrl_file), task, 0, task.seeds(1)[0], max_steps=10)
+    sandboxed = run_episode(EpisodeJob(str(ctrl_file), task, 0, task.seeds(1)[0], max_steps=10))
+    assert sandboxed["steps"] == 10  # the image crosses into the controller process and back
+    # isolation "none" (debugging) keeps the controller in this process, so its log can be read here
+    job = EpisodeJob(str(ctrl_file), task, 0, task.seeds(1)[0], max_steps=10, isolation="none")
     row = run_episode(job)
-    module = ev._controller_for(job).__class__.__module__
-    log = sys.modules[module].LOG
+    log = sandbox.controller_for(str(ctrl_file), task, "none").ctrl.__class__.__module__
+    log = sys.modules[log].LOG
     assert row["steps"] == 10
     assert [step for step, _ in log] == [0, 4, 8]  # before act on steps 0, 4, 8
     assert log[-1][1].std() > 0  # a real rendered picture, not a blank

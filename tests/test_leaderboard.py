@@ -294,19 +294,77 @@ def test_build_refuses_a_bad_record_but_shows_the_good_ones(board_dir, records):
 
 
 # ----------------------------------------------------------------------------------------- CLI
-def test_cli_add_validates_copies_and_rebuilds(tmp_path, records):
+def test_cli_add_refuses_a_record_without_its_run_folder(tmp_path, records):
     board = tmp_path / "lb"
     board.mkdir()
-    shutil.copy(PAPER_REFERENCE, board / "paper_reference.json")
     src = tmp_path / "result.json"
-    src.write_text(json.dumps(records[1]))
+    src.write_text(json.dumps(records[1]))  # self-consistent, but invented: no action logs to replay
+    res = CliRunner().invoke(app, ["leaderboard", "add", str(src), "--dir", str(board)])
+    assert res.exit_code == 1 and "joins only with its run folder" in res.output
+    assert list(board.iterdir()) == []
+
+
+def test_cli_add_replays_a_run_copies_it_with_its_admission_and_rebuilds(tmp_path, tiny_protocol):
+    from hexbench.evaluate import evaluate
+    from hexbench.tasks import load_suite
+
+    run = tmp_path / "run"
+    res = evaluate(str(REPO / "baselines" / "cpg.py"), list(load_suite("v1").tasks), run, workers=1, record=False,
+                   progress=False)
+    assert res.error is None
+    board = tmp_path / "lb"
+    board.mkdir()
     runner = CliRunner()
-    res = runner.invoke(app, ["leaderboard", "add", str(src), "--dir", str(board)])
-    assert res.exit_code == 0, res.output
-    assert (board / "middling.json").exists() and all((board / n).exists() for n in lb.GENERATED_FILES)
-    again = runner.invoke(app, ["leaderboard", "add", str(src), "--dir", str(board)])
+    added = runner.invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--workers", "1"])
+    assert added.exit_code == 0, added.output
+    entry = json.loads((board / "cpg.json").read_text())
+    assert entry["admission"]["episodes_replayed"] == entry["admission"]["episodes_total"] == 6
+    assert lb.record_tier(entry, "cpg.json") == lb.TIER_REPLAYED
+    assert all((board / n).exists() for n in lb.GENERATED_FILES)
+    again = runner.invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--workers", "1"])
     assert again.exit_code == 1 and "already exists; pass --replace" in again.output
-    assert runner.invoke(app, ["leaderboard", "add", str(src), "--dir", str(board), "--replace"]).exit_code == 0
+    sampled = runner.invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--replace", "--sample", "2",
+                                  "--workers", "1"])
+    assert sampled.exit_code == 1 and "never puts a less proven record" in sampled.output
+    assert runner.invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--replace",
+                               "--workers", "1"]).exit_code == 0
+
+    # a row edited after admission (summaries and digest recomputed too) no longer matches its admission
+    forged = json.loads((board / "cpg.json").read_text())
+    forged["episodes"][0]["success"] = True
+    forged["episodes"][0]["end_reason"] = "success"
+    with pytest.raises(lb.RecordError, match="changed after admission"):
+        lb.record_tier(forged, "forged.json")
+
+
+def test_add_refuses_a_forged_run_and_one_made_in_process(tmp_path, tiny_protocol):
+    from hexbench.evaluate import evaluate
+    from hexbench.records import episodes_digest
+    from hexbench.scoring import summarize_levels, summarize_terrains
+    from hexbench.tasks import load_suite
+
+    tasks = list(load_suite("v1").tasks)
+    run = tmp_path / "run"
+    assert evaluate(str(REPO / "baselines" / "cpg.py"), tasks, run, workers=1, record=False, progress=False).error is None
+    board = tmp_path / "lb"
+    board.mkdir()
+    record = json.loads((run / "result.json").read_text())
+    # self-consistent forgery: a success flipped, summaries and digest recomputed from the rows
+    record["episodes"][0].update(success=True, end_reason="success", time_to_goal_s=0.5)
+    units = {t.terrain: t.unit for t in tasks}
+    headroom = {(t.terrain, t.level): t.headroom for t in tasks}
+    record["levels"] = summarize_levels(record["episodes"], units, headroom)
+    record["terrains"] = summarize_terrains(record["levels"])
+    record["episodes_digest"] = episodes_digest(record["episodes"])
+    (run / "result.json").write_text(json.dumps(record))
+    with pytest.raises(lb.RecordError, match="success: recorded True, replayed False"):
+        lb.add(run, board)
+    debug = tmp_path / "debug"
+    assert evaluate(str(REPO / "baselines" / "cpg.py"), tasks, debug, workers=1, record=False, progress=False,
+                    isolation="none").error is None
+    with pytest.raises(lb.RecordError, match="isolation none"):
+        lb.add(debug, board)
+    assert list(board.iterdir()) == []
 
 
 def test_cli_add_refuses_a_bad_record_and_writes_nothing(tmp_path, records):
@@ -349,11 +407,13 @@ def test_committed_leaderboard_is_what_build_produces(tmp_path):
 
 def test_extra_course_records_are_scored_apart_in_their_own_table(tmp_path):
     board = tmp_path / "board"
-    board.mkdir()
+    (board / "courses").mkdir(parents=True)
     for label, capability, seed in (("hlta", 2.6, 7), ("ppo_cpg", 1.4, 8)):
-        path = tmp_path / f"{label}.json"
+        path = board / "courses" / f"{label}.json"
         path.write_text(json.dumps(synthetic_record(label, {"mixed": capability}, seed, courses=True)))
-        assert lb.add(path, board) == board / "courses" / f"{label}.json"
+        lb.measured_row(json.loads(path.read_text()), str(path), course=True)  # valid as a course record
+        with pytest.raises(lb.RecordError, match="joins only with its run folder"):
+            lb.add(path, tmp_path / "board")
     result = lb.build(board)
     assert not result.errors
     text = (board / "courses" / "README.md").read_text()
@@ -369,3 +429,215 @@ def test_extra_course_records_are_scored_apart_in_their_own_table(tmp_path):
     full["episodes"].append(dict(broken["episodes"][0]))
     with pytest.raises(lb.RecordError, match="'mixed' is an extra course, scored apart"):
         lb.measured_row(full, "full.json")
+
+
+# ------------------------------------------------------------------ hostile strings in records
+# Every string of a record comes from its submitter; the outputs must show it as literal text.
+HOSTILE = ('=HYPERLINK("http://x")<img src=x onerror=alert(1)></script><script>alert(1)</script> a|b '
+           '[x](javascript:alert(1)) *em* _u_ `c` ~~s~~ $x^2$ &lt; \\| <!-- --> & id="text_1" href="#text_1" '
+           'url(#text_1)\r\nnext line')
+HOSTILE_FILE = "=1+1 <img src=x onerror=alert(1)> a|b.json"  # becomes the `record`/`Record` column
+HOSTILE_COMMAND = "hexbench run `x` ``y`` | tee </script><script>alert(1)</script>\n<img src=x onerror=alert(1)>"
+CODE_COMMAND = "hexbench run `x` ``y`` | tee a_b *c* [d](javascript:e) \\| &amp; $f$"  # no `<`: a code span
+
+
+def _one_line(text: str) -> str:
+    """What a one-line output (a Markdown cell) shows for `text`: control characters as spaces."""
+    return re.sub(r"[\x00-\x1f\x7f-\x9f]", " ", text)
+
+
+def _hostile_measured(label: str = HOSTILE, seed: int = 4, **kwargs) -> dict:
+    record = synthetic_record("hostile", kwargs.pop("capability", {"rough": 8.0, "slopes": 10.0, "stairs": 5.0}),
+                              seed, **kwargs)
+    record["label"] = label
+    record["controller"].update(file="@SUM(1+1)*cmd|' /C calc'!A0 <img src=x onerror=alert(1)>.py",
+                                action_mode="</span><img src=x onerror=alert(1)>",
+                                checkpoints=[{"path": "<img src=x>/[a](javascript:1).zip", "sha256": "d" * 64}])
+    record["provenance"].update(command=HOSTILE_COMMAND, git_commit="<img src=x>|`*_[",
+                                machine={"hostname": "<script>alert(1)</script>"})
+    return record
+
+
+def _hostile_reported() -> dict:
+    record = json.loads(PAPER_REFERENCE.read_text())
+    series = record["reported"]["series"]
+    series[0]["label"] = "-" + HOSTILE + " (paper)"
+    series[0]["table"] = '"><img src=x onerror=alert(1)>'
+    real = next(s for s in series if s["setting"] == "real robot")
+    real["label"] = "+a|b <img src=x onerror=alert(1)> (paper)"
+    record["reported"]["citation"] = "# " + HOSTILE
+    record["reported"]["note"] = "1. <img src=x onerror=alert(1)>\n- [x](javascript:alert(1))"
+    return record
+
+
+@pytest.fixture()
+def hostile_dir(tmp_path: Path, records: list[dict]) -> Path:
+    d = tmp_path / "hostile"
+    d.mkdir()
+    for r in records:
+        (d / f"{r['label']}.json").write_text(json.dumps(r))
+    (d / HOSTILE_FILE).write_text(json.dumps(_hostile_measured()))
+    code = _hostile_measured("a|b `c`", seed=5)
+    code["provenance"]["command"] = CODE_COMMAND
+    (d / "code.json").write_text(json.dumps(code))
+    (d / "paper_reference.json").write_text(json.dumps(_hostile_reported()))
+    result = lb.build(d)
+    assert result.errors == [] and HOSTILE in {r.label for r in result.board.measured}
+    assert "-" + HOSTILE + " (paper)" in {r.label for r in result.board.reported}
+    return d
+
+
+def _md_table_lines(text: str) -> list[list[str]]:
+    """Each Markdown table of `text` as its lines."""
+    tables, current = [], []
+    for line in text.splitlines() + [""]:
+        if line.startswith("|"):
+            current.append(line)
+        elif current:
+            tables.append(current)
+            current = []
+    return tables
+
+
+def _unescaped_pipes(line: str) -> int:
+    return len(re.findall(r"(?<!\\)\|", line))  # GFM: every `\|` stays in its cell
+
+
+def _parse_html(text: str):
+    """(tags with their attributes, data of each element by tag name) of an HTML text."""
+    from html.parser import HTMLParser
+
+    class Parser(HTMLParser):
+        def __init__(self):
+            super().__init__(convert_charrefs=True)
+            self.tags, self.stack, self.data = [], [], {}
+
+        def handle_starttag(self, tag, attrs):
+            self.tags.append((tag, dict(attrs)))
+            if tag not in ("br", "meta", "img", "hr", "input", "link"):  # void elements hold no data
+                self.stack.append(tag)
+
+        def handle_startendtag(self, tag, attrs):
+            self.tags.append((tag, dict(attrs)))
+
+        def handle_endtag(self, tag):
+            if tag in self.stack:
+                while self.stack.pop() != tag:
+                    pass
+
+        def handle_data(self, data):
+            if self.stack:
+                self.data.setdefault(self.stack[-1], []).append(data)
+
+    parser = Parser()
+    parser.feed(text)
+    parser.close()
+    return parser.tags, parser.data
+
+
+def test_markdown_escaping_leaves_plain_strings_alone_and_defuses_the_rest():
+    for plain in ("ppo_cpg", "PPO-CPG (paper)", "PPO-CPG, the paper's method (paper)", "cpg_residual",
+                  "baselines/checkpoints/terrain_classifier.pt", "66598280c7e8", "Table 4"):
+        assert lb._md(plain) == plain and lb._md(plain, block=True) == plain
+    assert lb._md("<img src=x> a&b") == "&lt;img src=x&gt; a&amp;b"
+    assert lb._md("[x](javascript:alert(1)) *a* _b_ `c` ~d~ $e$ \\") == (
+        "\\[x\\](javascript:alert(1)) \\*a\\* \\_b\\_ \\`c\\` \\~d\\~ \\$e\\$ \\\\")
+    assert lb._md("a\nb\r\tc\x00") == "a b  c "
+    assert lb._md("# h", block=True) == "\\# h" and lb._md("1. x", block=True) == "1\\. x"
+    assert lb._md("- x", block=True) == "\\- x" and lb._md("- x") == "- x"
+    assert lb._md_code("hexbench run a_b.py") == "`hexbench run a_b.py`"
+    assert lb._md_code("a ``b`` c") == "```a ``b`` c```" and lb._md_code("`a`") == "`` `a` ``"
+    assert lb._md_code("a <b>\nc") == "a &lt;b&gt; c"  # no raw tag in the file, not even in a code span
+    assert lb._md_table(["h|x"], [["a|b"]]) == "| h\\|x |\n| --- |\n| a\\|b |"
+
+
+def test_hostile_record_strings_render_as_literal_text_in_readme(hostile_dir):
+    markdown_it = pytest.importorskip("markdown_it")
+    readme = (hostile_dir / "README.md").read_text()
+    assert "<" not in readme  # no raw tag at all (`<` from a record is written as &lt;)
+    for table in _md_table_lines(readme):  # no string adds a cell: every line has the header's pipes
+        assert {_unescaped_pipes(line) for line in table} == {_unescaped_pipes(table[0])}, table[0]
+    # rendered like GitHub (CommonMark + tables + strikethrough, inline HTML passed through)
+    page = markdown_it.MarkdownIt("commonmark", {"html": True}).enable(["table", "strikethrough"]).render(readme)
+    tags, data = _parse_html(page)
+    names = [t for t, _ in tags]
+    assert not {"img", "script", "a", "em", "s", "del", "ol", "hr"} & set(names), sorted(set(names))
+    assert names.count("strong") == readme.count("**") // 2  # the page's own bold terms only
+    assert names.count("h1") == 1 and "h1" not in [t for t, _ in tags[1:]]
+    cells = {c.strip() for c in data.get("td", []) + data.get("th", [])}
+    assert _one_line(HOSTILE) in cells  # the label is shown as exactly its text
+    assert _one_line("-" + HOSTILE + " (paper)") + ": reported, not run here" in cells
+    assert "+a|b <img src=x onerror=alert(1)> (paper): Stairs [cm]" in cells
+    assert _one_line(HOSTILE_FILE) in cells and "<img src=x>|" in cells and _one_line(HOSTILE_COMMAND) in cells
+    assert CODE_COMMAND in data["code"] and "a|b `c`" in cells  # a code span with a ``` fence, in a table
+    paragraphs = {p.strip() for p in data.get("p", [])}
+    assert _one_line("# " + HOSTILE) in paragraphs
+    assert "1. <img src=x onerror=alert(1)> - [x](javascript:alert(1))" in paragraphs
+
+
+def _lf(text: str) -> str:
+    return text.replace("\r\n", "\n")  # HTML parsers (and read_text) read CRLF as LF
+
+
+def test_hostile_record_strings_are_escaped_in_index_html(hostile_dir):
+    page = (hostile_dir / "index.html").read_text()
+    assert "<img" not in page and page.count("<script") == 1 and page.count("</script>") == 1
+    assert not re.search(r"<(iframe|object|embed|a)\b", page)
+    tags, data = _parse_html(page)
+    assert [t for t, _ in tags].count("script") == 1
+    assert "".join(data["script"]).strip() == (lb.ASSETS_DIR / "sortable.js").read_text().strip()
+    for tag, attrs in tags:
+        assert not any(name.startswith("on") for name in attrs), (tag, attrs)
+        assert not any(str(v).lower().startswith("javascript:") for v in attrs.values()), (tag, attrs)
+    # every string comes back as exactly itself: in text, in data-* and title attributes, in the plots
+    assert any(attrs.get("data-label") == _lf(HOSTILE) for tag, attrs in tags if tag == "tr")
+    assert any(attrs.get("data-sort") == _lf(HOSTILE) for tag, attrs in tags if tag == "td")
+    assert any('"><img src=x onerror=alert(1)>' in attrs.get("title", "") for tag, attrs in tags if tag == "td")
+    text = "".join(d for chunks in data.values() for d in chunks)
+    for s in (HOSTILE, HOSTILE_FILE, HOSTILE_COMMAND, "</span><img src=x onerror=alert(1)>", "# " + HOSTILE,
+              "+a|b <img src=x onerror=alert(1)> (paper)"):
+        assert _lf(s) in text, s
+    # legend entry: the label on one line, literal (no mathtext for `$x^2$`)
+    assert data["text"].count(_one_line(HOSTILE)) == len(load_suite("v1").terrains)
+
+
+def test_hostile_record_strings_are_quoted_and_defused_in_csv(hostile_dir):
+    with open(hostile_dir / "leaderboard.csv", newline="", encoding="utf-8") as f:
+        rows = list(csv.reader(f))
+    header, body = rows[0], rows[1:]
+    assert tuple(header) == lb.CSV_COLUMNS and all(len(row) == len(header) for row in body)
+    table = [dict(zip(header, row)) for row in body]
+    hostile = [row for row in table if row["controller"] == "'" + HOSTILE]
+    assert len(hostile) == len([row for row in table if row["controller"] == "strong"]) > 0
+    assert {row["record"] for row in hostile} == {"'" + HOSTILE_FILE}
+    assert any(row["controller"] == "'-" + HOSTILE + " (paper)" for row in table)
+    assert any(row["controller"] == "'+a|b <img src=x onerror=alert(1)> (paper)" for row in table)
+    assert {row["controller"] for row in table} >= {"strong", "middling", "weak"}
+    text_columns = ("kind", "setting", "controller", "record", "terrain", "unit")
+    for row in table:
+        for column, cell in row.items():
+            if column in text_columns:
+                assert not cell.startswith(("=", "+", "-", "@", "\t", "\r")), (column, cell)
+            elif cell not in ("", "true", "false"):
+                [float(v) for v in cell.split(";")]  # numbers stay numbers, never apostrophed
+
+
+def test_hostile_course_record_strings_render_as_literal_text(tmp_path):
+    markdown_it = pytest.importorskip("markdown_it")
+    board = tmp_path / "board"
+    (board / "courses").mkdir(parents=True)
+    record = _hostile_measured("# " + HOSTILE, seed=11, capability={"mixed": 2.0}, courses=True)
+    (board / "courses" / HOSTILE_FILE).write_text(json.dumps(record))
+    assert lb.build(board).errors == []
+    readme = (board / "courses" / "README.md").read_text()
+    assert "<" not in readme
+    for table in _md_table_lines(readme):
+        assert {_unescaped_pipes(line) for line in table} == {_unescaped_pipes(table[0])}, table[0]
+    page = markdown_it.MarkdownIt("commonmark", {"html": True}).enable(["table", "strikethrough"]).render(readme)
+    tags, data = _parse_html(page)
+    names = [t for t, _ in tags]
+    assert not {"img", "script", "a", "em", "strong", "s", "del", "ol", "hr"} & set(names)
+    assert names.count("h1") == 1 and names.count("ul") == 1  # the commands list, no list in a list item
+    cells = {c.strip() for c in data.get("td", [])}
+    assert _one_line("# " + HOSTILE) in cells and _one_line(HOSTILE_FILE) in cells
+    assert _one_line("# " + HOSTILE) + ": " + _one_line(HOSTILE_COMMAND) in {li.strip() for li in data["li"]}

@@ -273,7 +273,7 @@ def test_killed_worker_leaves_finished_episodes_readable_and_no_partial_file(tmp
 
 def _short_protocol_episode(out: Path) -> Path:
     task = load_suite("v1").task("stairs", 2.0)
-    row = run_episode(EpisodeJob(CPG, task, 0, task.seeds(1)[0], record_dir=str(out), max_steps=40))
+    row = run_episode(EpisodeJob(CPG, task, 0, task.seeds(1)[0], record_dir=str(out), max_steps=40, log_dir=str(out)))
     return out / row["mcap_path"]
 
 
@@ -311,9 +311,12 @@ def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
     runner = CliRunner()
     ok = runner.invoke(app, ["verify", str(path)])
     assert ok.exit_code == 0, ok.output
-    assert "match the re-simulation exactly" in ok.output
+    assert "match the re-simulation from its action log exactly" in ok.output
 
+    actions = path.with_suffix(".actions")
+    assert actions.is_file()  # verify replays the action log, never the controller
     tampered = tmp_path / "tampered.mcap"
+    (tmp_path / actions.name).write_bytes(actions.read_bytes())
     _rewrite_with_changed_metric(path, tampered, step=18)  # /metrics logs steps 3, 6, ...: message 5
     check_integrity(tampered)  # a consistent file: only re-simulation can tell
     bad = runner.invoke(app, ["verify", str(tampered)])

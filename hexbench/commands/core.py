@@ -78,6 +78,24 @@ def print_success_table(record: dict, console) -> None:
                       + "  (* = headroom level beyond paper Table 4)", highlight=False)
 
 
+ISOLATION_HELP = ("controller isolation: auto (bubblewrap where it works, else process), bubblewrap, process, "
+                  "or none (in-process, debugging only; the leaderboard refuses such records)")
+
+
+def _check_files(files: list[str]) -> list[str]:
+    """Each name must be an existing file; problems are one line each (the other files still run)."""
+    from pathlib import Path
+
+    problems = []
+    for f in files:
+        p = Path(f)
+        if p.is_dir():
+            problems.append(f"{f}: is a folder; expected a controller file (.py) defining make_controller(task)")
+        elif not p.is_file():
+            problems.append(f"{f}: no such controller file")
+    return problems
+
+
 def _register_run(app: typer.Typer) -> None:
     @app.command("run")
     def run(
@@ -88,8 +106,14 @@ def _register_run(app: typer.Typer) -> None:
         workers: int = typer.Option(0, "--workers", min=0, help="worker processes (0: all cores)"),
         out: str = typer.Option(None, "--out", help="output directory (default runs/<name>-<protocol>)"),
         protocol: str = typer.Option("v1", "--protocol", help="protocol version"),
-        record: bool = typer.Option(True, "--record/--no-record", help="write MCAP + Rerun logs per episode"),
+        record: bool = typer.Option(True, "--record/--no-record", help="write MCAP + Rerun logs per episode "
+                                    "(action logs are always written)"),
         label: str = typer.Option(None, "--label", help="name in records (default: file name without .py)"),
+        isolation: str = typer.Option("auto", "--isolation", help=ISOLATION_HELP),
+        seed_key: str = typer.Option(None, "--seed-key", help="file with a secret key: episode seeds are derived from "
+                                     "it (HMAC), so nobody can know the episodes in advance"),
+        make_timeout: float = typer.Option(120.0, "--make-timeout", min=0.1,
+                                           help="deadline for the controller process to start and build [s]"),
     ) -> None:
         """Evaluate controller files on the protocol; print a success table; write result.json and episodes.parquet."""
         import os
@@ -97,17 +121,24 @@ def _register_run(app: typer.Typer) -> None:
 
         from rich.console import Console
 
-        from hexbench.controller import ControllerError
+        from hexbench.errors import HexbenchError
         from hexbench.evaluate import evaluate
+        from hexbench.sandbox import resolve_isolation
+        from hexbench.seeds import SeedSet, read_seed_key
         from hexbench.tasks import load_suite
 
         console = Console()
         err = Console(stderr=True, soft_wrap=True)
         try:
             tasks = load_suite(protocol).select(terrain or None, _parse_levels(levels))
-        except ValueError as e:
+            mode = resolve_isolation(isolation)
+            seed_set = read_seed_key(seed_key) if seed_key else SeedSet()
+        except (ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2)
+        if mode == "process":
+            err.print("note: bubblewrap is not usable here; controllers run in plain child processes "
+                      "(--isolation process: the file system is not hidden). Debian: apt-get install bubblewrap")
         if record:
             try:
                 import hexbench.recording  # noqa: F401
@@ -116,12 +147,16 @@ def _register_run(app: typer.Typer) -> None:
                 record = False
         n_workers = workers or os.cpu_count() or 1
         failed = 0
-        for f in files:
+        for problem in _check_files(files):
+            typer.echo(f"error: {problem}", err=True)
+            failed += 1
+        for f in [f for f in files if Path(f).is_file()]:
             name = label if (label and len(files) == 1) else Path(f).stem
             out_dir = Path(out) / (name if len(files) > 1 else "") if out else Path("runs") / f"{name}-{protocol}"
             try:
-                result = evaluate(f, tasks, out_dir, episodes=episodes, workers=n_workers, record=record, label=name)
-            except ControllerError as e:
+                result = evaluate(f, tasks, out_dir, episodes=episodes, workers=n_workers, record=record, label=name,
+                                  isolation=mode, seed_set=seed_set, make_timeout_s=make_timeout)
+            except HexbenchError as e:
                 result = None
                 typer.echo(f"error: {e}", err=True)
             else:
@@ -132,7 +167,8 @@ def _register_run(app: typer.Typer) -> None:
                 continue
             print_success_table(result.record, console)
             console.print(f"wrote {out_dir / 'result.json'} and {out_dir / 'episodes.parquet'} "
-                          f"({result.record['provenance']['wall_time_s']:.1f} s, {n_workers} workers)")
+                          f"({result.record['provenance']['wall_time_s']:.1f} s, {n_workers} workers, "
+                          f"isolation {mode})", highlight=False)
         if failed:
             raise typer.Exit(1)
 
@@ -141,26 +177,43 @@ def _register_run(app: typer.Typer) -> None:
         files: list[str] = typer.Argument(..., help="controller file(s) to check"),
         steps: int = typer.Option(120, "--steps", min=1, help="control steps per terrain"),
         protocol: str = typer.Option("v1", "--protocol"),
+        isolation: str = typer.Option("auto", "--isolation", help=ISOLATION_HELP),
+        make_timeout: float = typer.Option(120.0, "--make-timeout", min=0.1,
+                                           help="deadline for the controller process to start and build [s]"),
     ) -> None:
         """One short episode per terrain (easiest level) to catch a broken controller in seconds."""
+        from pathlib import Path
+
         from rich.console import Console
 
-        from hexbench.controller import ControllerError
+        from hexbench import sandbox
+        from hexbench.errors import HexbenchError
         from hexbench.evaluate import EpisodeJob, run_episode
         from hexbench.tasks import load_suite
 
         console = Console()
-        suite = load_suite(protocol)
+        try:
+            suite = load_suite(protocol)
+            mode = sandbox.resolve_isolation(isolation)
+        except (ValueError, HexbenchError) as e:
+            typer.echo(f"error: {e}", err=True)
+            raise typer.Exit(2)
         failed = 0
-        for f in files:
+        for problem in _check_files(files):
+            typer.echo(f"error: {problem}", err=True)
+            failed += 1
+        for f in [f for f in files if Path(f).is_file()]:
             try:
                 for terrain_name in suite.terrains:
                     task = suite.task(terrain_name, suite.levels(terrain_name)[0])
-                    row = run_episode(EpisodeJob(f, task, 0, task.seeds(1)[0], max_steps=steps))
+                    row = run_episode(EpisodeJob(f, task, 0, task.seeds(1)[0], max_steps=steps, isolation=mode,
+                                                 make_timeout_s=make_timeout))
                     console.print(f"{f}: {task.name}: ok ({row['steps']} steps, {row['end_reason'] or 'running'},"
-                                  f" {row['progress_m']:.2f} m)", highlight=False)
-            except ControllerError as e:
+                                  f" {row['progress_m']:.2f} m, isolation {mode})", highlight=False)
+            except HexbenchError as e:
                 typer.echo(f"error: {e}", err=True)
                 failed += 1
+            finally:
+                sandbox.close_all()
         if failed:
             raise typer.Exit(1)

@@ -41,18 +41,30 @@ def register(app: typer.Typer) -> None:
 
     @group.command("add")
     def add_cmd(
-        result_json: Path = typer.Argument(..., help="result record written by `hexbench run`"),
+        run_dir: Path = typer.Argument(..., help="a run folder written by `hexbench run` (its result.json and "
+                                                 "action logs), or a reported record (.json)"),
         directory: Path = typer.Option(Path("leaderboard"), "--dir", help="folder holding the result records"),
-        replace: bool = typer.Option(False, "--replace", help="overwrite a record of the same name"),
+        replace: bool = typer.Option(False, "--replace", help="overwrite a record of the same name (never with a "
+                                     "less proven one)"),
         protocol: str = typer.Option("v1", help="protocol version of the leaderboard to add to"),
+        sample: int = typer.Option(None, "--sample", min=1, help="replay this many episodes drawn at random "
+                                   "(default: all; the entry states how many were replayed)"),
+        workers: int = typer.Option(0, "--workers", min=0, help="replay processes (0: all cores)"),
+        seed_key: str = typer.Option(None, "--seed-key", help="the key of a keyed (hidden) seed set"),
     ) -> None:
-        """Validate RESULT.json (protocol, every seed, provenance, summary vs episodes), copy it in, rebuild."""
+        """Validate a run's record, replay its episodes from their action logs, copy it in with its admission, rebuild."""
+        import os
+
+        from hexbench.errors import HexbenchError
         from hexbench.leaderboard import RecordError, add, build
+        from hexbench.seeds import read_seed_key
 
         try:
-            dest = add(result_json, directory, replace=replace, protocol=protocol)
+            seed_set = read_seed_key(seed_key) if seed_key else None
+            dest = add(run_dir, directory, replace=replace, protocol=protocol, sample=sample,
+                       workers=workers or os.cpu_count() or 1, seed_set=seed_set, progress=True)
             result = build(directory, protocol)
-        except (RecordError, ValueError) as e:
+        except (RecordError, ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(1) from None
         for line in result.errors:

@@ -147,11 +147,36 @@ def register(app: typer.Typer) -> None:
         raise typer.Exit(subprocess.call([exe, str(rrd)]))
 
     @app.command("verify")
-    def verify(episode: str = typer.Argument(..., help="an episode's .mcap file")) -> None:
-        """Re-simulate an episode from its logged metadata and check that it matches the log exactly."""
+    def verify(
+        path: str = typer.Argument(..., help="a run folder (with result.json), or one episode's .mcap file"),
+        sample: int = typer.Option(None, "--sample", min=1, help="replay this many episodes drawn at random (default all)"),
+        workers: int = typer.Option(0, "--workers", min=0, help="replay processes (0: all cores)"),
+        seed_key: str = typer.Option(None, "--seed-key", help="the key of a keyed seed set, to check its seeds"),
+    ) -> None:
+        """Replay a run's episodes from their action logs alone (never the controller) and check every row,
+        the summaries, the digest and the seeds; the first mismatch is named."""
+        import os
+
+        from hexbench.errors import HexbenchError
+
+        p = Path(path)
+        if p.is_dir():
+            from hexbench.seeds import read_seed_key
+            from hexbench.verify import verify_run
+
+            try:
+                seed_set = read_seed_key(seed_key) if seed_key else None
+                report = verify_run(p, sample=sample, workers=workers or os.cpu_count() or 1, seed_set=seed_set,
+                                    progress=True)
+            except HexbenchError as e:
+                _fail(str(e), 2)
+            if not report.ok:
+                _fail(report.message)
+            typer.echo(f"ok: {report.message}")
+            return
         from hexbench.recording.verify import verify_episode
 
-        result = verify_episode(_episode_file(episode, ".mcap"))
+        result = verify_episode(_episode_file(path, ".mcap"))
         if not result.ok:
             _fail(result.message)
         typer.echo(f"ok: {result.message}")

@@ -2,8 +2,8 @@
 
 Minari needs every step's observation, and the observation a controller saw includes the
 seeded observation noise, which the logs do not store. So each logged episode is replayed
-exactly from its metadata (task, seed, controller file, step limit) in the task's environment,
-and the replay is checked against the log (same number of steps, same per-step rewards to the
+exactly from its task, seed and action log (`<episode id>.actions`; the controller is never run)
+through the one episode loop (hexbench.rollout), and the replay is checked against the log (same number of steps, same per-step rewards to the
 logged precision) before it is kept. Episodes are handed to `minari.create_dataset_from_buffers`
 (Minari's DataCollector would need jax); actions are stored as float32 (the action space's dtype).
 Datasets go to RUN/minari/ (MINARI_DATASETS_PATH is pointed there while writing), with ids
@@ -34,53 +34,47 @@ def export_run(run_dir: Path, dataset_id: str | None = None) -> Path:
     import minari
     from minari.data_collector.episode_buffer import EpisodeBuffer
 
-    from hexbench.controller import check_action, file_sha256, make_controller
-    from hexbench.env import HexapodEnv
+    from hexbench import action_log
+    from hexbench.errors import HexbenchError
+    from hexbench.rollout import LoggedActions, make_env, play
     from hexbench.tasks import load_suite
 
     run_dir = Path(run_dir)
     groups: dict[tuple, list] = defaultdict(list)
     for f in _episode_files(run_dir):
-        e = read_episode(f).episode
-        controller = Path(e["controller_file"])
-        if not controller.is_file() or file_sha256(controller) != e["controller_sha256"]:
-            raise ValueError(f"{f}: controller file {e['controller_file']} is missing or changed since recording")
-        groups[(e["protocol"], e["terrain"], float(e["level"]), e["controller_file"], e["action_mode"])].append((f, e))
+        log = read_episode(f)
+        e = log.episode
+        try:
+            actions = action_log.read(f.with_name(f"{e['episode_id']}{action_log.SUFFIX}"),
+                                      log.outcome.get("action_log_sha256"))
+        except HexbenchError as err:
+            raise ValueError(f"{f}: {err}") from None
+        groups[(e["protocol"], e["terrain"], float(e["level"]), e["controller_file"], e["action_mode"])].append(
+            (f, e, actions))
     run_name = re.sub(r"[^A-Za-z0-9]+", "-", run_dir.resolve().name).strip("-").lower() or "run"
     out_root = run_dir / "minari"
     previous = os.environ.get("MINARI_DATASETS_PATH")
     os.environ["MINARI_DATASETS_PATH"] = str(out_root.resolve())
     try:
-        for (protocol, terrain, level, controller_file, mode), episodes in sorted(groups.items()):
+        for (protocol, terrain, level, controller_file, mode), episodes in sorted(groups.items(), key=lambda g: g[0]):
             task = load_suite(protocol).task(terrain, level)
             max_steps = int(episodes[0][1].get("max_steps", task.max_steps))
-            env = HexapodEnv(replace(task.env_config(mode), max_steps=max_steps))
-            ctrl = make_controller(controller_file, task)
-            dim = env.action_space.shape[0]
+            env = make_env(task, mode, max_steps)
             buffers = []
-            for f, e in sorted(episodes, key=lambda x: int(x[1]["index"])):
+            for f, e, actions in sorted(episodes, key=lambda x: int(x[1]["index"])):
                 seed = int(e["seed"])
-                obs, _ = env.reset(seed=seed)
-                ctrl.reset(seed)
-                observations, actions, rewards, terminations, truncations = [obs], [], [], [], []
-                while True:
-                    action = check_action(ctrl.act(obs.copy()), dim, controller_file)
-                    obs, reward, terminated, truncated, _ = env.step(action)
-                    observations.append(obs)
-                    actions.append(action.astype(np.float32))
-                    rewards.append(float(reward))
-                    terminations.append(bool(terminated))
-                    truncations.append(bool(truncated))
-                    if terminated or truncated:
-                        break
+                steps = _StepCollector()
+                play(task, seed, _Observed(LoggedActions(actions, str(f)), steps), index=int(e["index"]),
+                     recorder=steps, env=env, where=str(f))
+                observations, rewards = steps.observations, steps.rewards
                 # /metrics logs every 3rd step and the last one; compare the steps it has, and the count
                 logged = {m["step"]: m["reward"] for m in metrics(f)}
                 if max(logged, default=0) != len(rewards) or any(
                         float(f"{rewards[k - 1]:.5g}") != lr for k, lr in logged.items()):
                     raise ValueError(f"{f}: the replayed episode differs from its log; not exported")
                 buffers.append(EpisodeBuffer(id=len(buffers), seed=seed, observations=np.array(observations),
-                                             actions=np.array(actions), rewards=rewards, terminations=terminations,
-                                             truncations=truncations))
+                                             actions=actions.actions.astype(np.float32), rewards=rewards,
+                                             terminations=steps.terminations, truncations=steps.truncations))
             env.close()
             ds_id = dataset_id or f"hexbench/{run_name}-{task.name}-v0"
             if dataset_id and len(groups) > 1:
@@ -97,3 +91,38 @@ def export_run(run_dir: Path, dataset_id: str | None = None) -> Path:
         else:
             os.environ["MINARI_DATASETS_PATH"] = previous
     return out_root
+
+
+class _Observed:
+    """An actor that notes the observation it is given before each action (Minari's observations)."""
+
+    camera = None
+
+    def __init__(self, actor, collector: "_StepCollector"):
+        self.actor, self.collector = actor, collector
+        self.action_mode = actor.action_mode
+
+    def reset(self, seed: int) -> None:
+        self.actor.reset(seed)
+
+    def act(self, obs: np.ndarray, step: int):
+        self.collector.observations.append(obs.copy())
+        return self.actor.act(obs, step)
+
+
+class _StepCollector:
+    """The rollout's recorder interface: rewards, end flags and the last observation of an episode."""
+
+    def __init__(self):
+        self.observations, self.rewards, self.terminations, self.truncations = [], [], [], []
+
+    def on_reset(self, env) -> None:
+        pass
+
+    def on_step(self, env, obs, action, reward, info) -> None:
+        self.rewards.append(float(reward))
+        reason = info["end_reason"]
+        self.terminations.append(reason is not None and reason != "step_limit")
+        self.truncations.append(reason == "step_limit")
+        if reason is not None:
+            self.observations.append(obs.copy())

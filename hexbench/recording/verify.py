@@ -1,9 +1,10 @@
-"""`hexbench verify`: re-simulate a logged episode from its metadata and compare it with the log.
+"""`hexbench verify EPISODE.mcap`: re-simulate a logged episode from its action log and compare it with the log.
 
-The episode is replayed with the evaluator's own episode function (`hexbench.evaluate.run_episode`)
-from the task, seed and controller file named in the log, recorded again into a temporary
-folder, and every message (topic, time, bytes) and the outcome record are compared with the
-logged file. Recording is deterministic (simulated time only), so a faithful log matches
+The episode is replayed through the one episode loop (hexbench.rollout) from the task and seed
+named in the log and the actions of its action log (`<episode id>.actions` beside the .mcap;
+the controller is never run, so a controller cannot vouch for itself), recorded again into a
+temporary folder, and every message (topic, time, bytes) and the outcome record are compared with
+the logged file. Recording is deterministic (simulated time only), so a faithful log matches
 exactly; any edit to a message, a lost message or a different controller shows up as the first
 mismatch. A damaged file fails its CRC check before any simulation.
 """
@@ -40,8 +41,10 @@ def _first_difference(logged: dict, replayed: dict) -> tuple[str | None, int]:
 
 
 def verify_episode(mcap_path: str | Path) -> VerifyResult:
-    from hexbench.controller import file_sha256
-    from hexbench.evaluate import EpisodeJob, run_episode
+    from hexbench import action_log
+    from hexbench.errors import HexbenchError
+    from hexbench.recording import make_episode_recorder
+    from hexbench.rollout import LoggedActions, play
     from hexbench.tasks import load_suite
 
     mcap_path = Path(mcap_path)
@@ -50,26 +53,34 @@ def verify_episode(mcap_path: str | Path) -> VerifyResult:
     except EpisodeFileError as e:
         return VerifyResult(False, str(e))
     e = log.episode
-    missing = [k for k in ("protocol", "terrain", "level", "index", "seed", "controller_file", "controller_sha256")
-               if k not in e]
+    missing = [k for k in ("protocol", "terrain", "level", "index", "seed", "episode_id") if k not in e]
     if missing:
         return VerifyResult(False, f"{mcap_path}: episode metadata lacks {', '.join(missing)}; cannot re-simulate")
-    controller = Path(e["controller_file"])
-    if not controller.is_file():
-        return VerifyResult(False, f"{mcap_path}: controller file {controller} not found (run from the directory the "
-                                   f"evaluation ran in)")
-    if file_sha256(controller) != e["controller_sha256"]:
-        return VerifyResult(False, f"{mcap_path}: controller file {controller} has changed since the episode was "
-                                   f"recorded (sha256 differs)")
+    actions_path = mcap_path.with_name(f"{e['episode_id']}{action_log.SUFFIX}")
     try:
+        actions = action_log.read(actions_path, log.outcome.get("action_log_sha256"))
         task = load_suite(e["protocol"]).task(e["terrain"], float(e["level"]))
-    except ValueError as err:
+    except (HexbenchError, ValueError) as err:
         return VerifyResult(False, f"{mcap_path}: {err}")
+    if (actions.terrain, float(actions.level), actions.index, actions.seed) != \
+            (e["terrain"], float(e["level"]), int(e["index"]), int(e["seed"])):
+        return VerifyResult(False, f"{mcap_path}: its action log {actions_path.name} belongs to another episode")
     max_steps = int(e["max_steps"]) if "max_steps" in e else None
     with tempfile.TemporaryDirectory(prefix="hexbench_verify_") as tmp:
-        job = EpisodeJob(str(controller), task, int(e["index"]), int(e["seed"]), record_dir=tmp,
-                         max_steps=None if max_steps in (None, task.max_steps) else max_steps)
-        row = run_episode(job)
+        meta = {k: v for k, v in e.items() if k not in ("max_steps", "residual_scale", "control_dt_s", "goal_distance_m")}
+        recorder = make_episode_recorder(Path(tmp), e["episode_id"], meta)
+        try:
+            episode = play(task, int(e["seed"]), LoggedActions(actions, str(actions_path)), index=int(e["index"]),
+                           recorder=recorder, max_steps=None if max_steps in (None, task.max_steps) else max_steps,
+                           where=str(actions_path))
+        except HexbenchError as err:
+            recorder.abort()
+            return VerifyResult(False, f"{mcap_path}: {err}")
+        row = dict(episode.row)
+        for key in ("action_log_path", "action_log_sha256"):
+            if key in log.outcome:
+                row[key] = log.outcome[key]
+        row.update(recorder.on_end(row))
         replay_path = Path(tmp) / row["mcap_path"]
         replay = read_episode(replay_path)
         diff, compared = _first_difference(all_messages(mcap_path), all_messages(replay_path))
@@ -81,4 +92,5 @@ def verify_episode(mcap_path: str | Path) -> VerifyResult:
         if keys:
             return VerifyResult(False, f"{mcap_path}: outcome differs from the re-simulation in {', '.join(keys)}",
                                 compared)
-    return VerifyResult(True, f"{mcap_path}: {compared} messages match the re-simulation exactly", compared)
+    return VerifyResult(True, f"{mcap_path}: {compared} messages match the re-simulation from its action log exactly",
+                        compared)

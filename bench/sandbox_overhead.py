@@ -1,0 +1,115 @@
+"""Wall-time cost of the controller sandbox, and the size of the action logs.
+
+    python bench/sandbox_overhead.py                       # PPO-CPG, 6 levels x 4 episodes, 2 workers, 3 rounds
+    python bench/sandbox_overhead.py --controller baselines/cpg.py --episodes 2 --rounds 1
+
+The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
+else process) and in-process (`--isolation none`), alternating A/B/A/B in one run so that load
+drifts hit both alike; the ratio is sandboxed / in-process wall time, per round and overall.
+Both runs must give identical episode rows (the sandbox changes where the controller runs, never
+what it does). Then the action-log bytes per episode (always written) and per control step.
+Also the evaluator <-> controller round trip for one act() call, with the two processes on one
+core (what `hexbench run` does) and free to run on different cores. Writes
+bench/out/sandbox_overhead.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from hexbench import sandbox
+from hexbench.evaluate import evaluate, pin_to_core
+from hexbench.tasks import load_suite
+
+REPO = Path(__file__).resolve().parent.parent
+LEVELS = (("rough", 3.0), ("rough", 11.0), ("slopes", 6.0), ("slopes", 20.0), ("stairs", 2.0), ("stairs", 8.0))
+
+
+def timed_run(controller: str, tasks, episodes: int, workers: int, isolation: str) -> tuple[float, dict, list[int]]:
+    with tempfile.TemporaryDirectory() as d:
+        t0 = time.perf_counter()
+        res = evaluate(controller, tasks, Path(d) / "run", episodes=episodes, workers=workers, record=False,
+                       progress=False, command="bench/sandbox_overhead.py", isolation=isolation)
+        wall = time.perf_counter() - t0
+        if res.error:
+            raise SystemExit(res.error)
+        sizes = [(Path(d) / "run" / "episodes" / r["action_log_path"]).stat().st_size
+                 for r in res.record["episodes"] if r.get("action_log_path")]
+    return wall, res.record, sizes
+
+
+def round_trip_us(isolation: str, pinned: bool, calls: int = 3000) -> float:
+    """Median time of one act() round trip to the open-loop CPG (no work in act) [us]."""
+    task = load_suite("v1").task("rough", 3.0)
+    previous = pin_to_core(0) if pinned else None
+    try:
+        ctrl = sandbox.controller_for(str(REPO / "baselines" / "cpg.py"), task, isolation)
+        obs = np.zeros(62, dtype=np.float32)
+        ctrl.reset(0)
+        times = []
+        for step in range(calls):
+            t0 = time.perf_counter()
+            ctrl.act(obs, step)
+            times.append(time.perf_counter() - t0)
+        sandbox.close_all()
+    finally:
+        if previous is not None:
+            os.sched_setaffinity(0, previous)
+    return statistics.median(times) * 1e6
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--controller", default=str(REPO / "baselines" / "ppo_cpg.py"))
+    ap.add_argument("--episodes", type=int, default=4, help="episodes per level")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rounds", type=int, default=3, help="A/B pairs")
+    args = ap.parse_args()
+    suite = load_suite("v1")
+    tasks = [suite.task(t, lv) for t, lv in LEVELS]
+    mode = sandbox.resolve_isolation("auto")
+    walls: dict[str, list[float]] = {mode: [], "none": []}
+    rows: dict[str, list] = {}
+    sizes: list[int] = []
+    steps: list[int] = []
+    for k in range(args.rounds):
+        for isolation in ((mode, "none") if k % 2 == 0 else ("none", mode)):
+            wall, record, log_sizes = timed_run(args.controller, tasks, args.episodes, args.workers, isolation)
+            walls[isolation].append(wall)
+            outcome = [{k2: v for k2, v in r.items() if not k2.startswith("action_log")} for r in record["episodes"]]
+            rows.setdefault(isolation, outcome)
+            if isolation == mode:
+                sizes, steps = log_sizes, [r["steps"] for r in record["episodes"]]
+            print(f"round {k + 1}: {isolation:<10} {wall:7.1f} s")
+    identical = rows[mode] == rows["none"]
+    ratio = sum(walls[mode]) / sum(walls["none"])
+    per_round = [a / b for a, b in zip(walls[mode], walls["none"])]
+    print(f"sandboxed ({mode}) / in-process wall time: {ratio:.3f} overall; per round "
+          + ", ".join(f"{r:.3f}" for r in per_round) + f"; rows identical: {identical}")
+    per_step = [s / n for s, n in zip(sizes, steps)]
+    print(f"action log per episode: mean {statistics.mean(sizes) / 1e3:.1f} kB, median "
+          f"{statistics.median(sizes) / 1e3:.1f} kB, max {max(sizes) / 1e3:.1f} kB "
+          f"({statistics.mean(per_step):.1f} bytes per control step; {len(sizes)} episodes)")
+    trips = {f"{iso}, {'one core' if pinned else 'free'}": round_trip_us(iso, pinned)
+             for iso in (mode, "none") for pinned in (True, False)}
+    for name, us in trips.items():
+        print(f"act() round trip ({name}): {us:.1f} us")
+    out = REPO / "bench" / "out"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sandbox_overhead.json").write_text(json.dumps({
+        "controller": args.controller, "isolation": mode, "episodes_per_level": args.episodes, "levels": LEVELS,
+        "workers": args.workers, "wall_time_s": walls, "ratio": ratio, "ratio_per_round": per_round,
+        "rows_identical": identical, "action_log_bytes": sizes, "episode_steps": steps,
+        "act_round_trip_us": trips, "load_average_at_end": os.getloadavg()}, indent=1))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,186 @@
+"""The controller sandbox: what a controller process sees, its deadlines, and its end."""
+
+import json
+import os
+import textwrap
+from pathlib import Path
+
+import psutil
+import pytest
+from typer.testing import CliRunner
+
+from hexbench import sandbox
+from hexbench.cli import app
+from hexbench.evaluate import EpisodeJob, evaluate, run_episode
+from hexbench.tasks import load_suite
+
+REPO = Path(__file__).resolve().parent.parent
+CPG = str(REPO / "baselines" / "cpg.py")
+needs_bwrap = pytest.mark.skipif(sandbox.bubblewrap_version() is None, reason="bubblewrap is not usable here")
+
+
+def controller(tmp_path, body: str, name: str = "probe.py") -> str:
+    """A controller file: the open-loop CPG plus `body` run in make_controller (task in scope) and act."""
+    path = tmp_path / name
+    path.write_text(textwrap.dedent('''
+        import numpy as np
+        class Probe:
+            action_mode = "cpg_residual"
+            def __init__(self, task):
+                self.task = task
+            def reset(self, seed):
+                self.seed = seed
+            def act(self, obs):
+                check(self)
+                return np.zeros(18, dtype=np.float32)
+        def make_controller(task):
+            return Probe(task)
+        ''') + textwrap.dedent(body))
+    return str(path)
+
+
+def short_job(path: str, isolation: str = "auto", steps: int = 5, **kw) -> EpisodeJob:
+    task = load_suite("v1").task("stairs", 2)
+    return EpisodeJob(path, task, 0, task.seeds(1)[0], max_steps=steps,
+                      isolation=sandbox.resolve_isolation(isolation), **kw)
+
+
+def no_children_left():
+    return [p for p in psutil.Process().children(recursive=True) if p.is_running() and p.status() != "zombie"]
+
+
+@pytest.fixture(autouse=True)
+def _stop_controllers():
+    yield
+    sandbox.close_all()
+
+
+@needs_bwrap
+def test_the_controller_sees_only_a_scratch_folder_a_clean_environment_and_no_network(tmp_path, monkeypatch):
+    monkeypatch.setenv("HEXBENCH_SECRET_MARKER", "leaked")
+    path = controller(tmp_path, '''
+        import os, socket
+        from pathlib import Path
+        def check(self):
+            assert "HEXBENCH_SECRET_MARKER" not in os.environ, "parent environment leaked"
+            assert os.getcwd() == "/scratch", os.getcwd()
+            Path("scratch-file").write_text("mine")  # the scratch folder is writable
+            for folder in ("/work/main/runs", "/root", str(Path.home()) + "/.ssh"):
+                assert not Path(folder, "x").exists()
+            try:
+                Path(__file__).with_name("planted.txt").write_text("x")
+            except OSError:
+                pass
+            else:
+                raise AssertionError("the controller's folder is writable")
+            try:
+                socket.create_connection(("127.0.0.1", 9), timeout=0.2)
+            except OSError:
+                pass
+            else:
+                raise AssertionError("network reachable")
+            assert os.getuid() == 65534
+        ''')
+    row = run_episode(short_job(path, "bubblewrap"))
+    assert row["steps"] == 5
+    assert not (tmp_path / "planted.txt").exists() and not Path("scratch-file").exists()
+
+
+def test_reset_gets_a_derived_seed_never_the_episode_seed(tmp_path):
+    path = controller(tmp_path, '''
+        def check(self):
+            assert self.seed not in self.task.seeds(), "reset() was given a protocol episode seed"
+        ''')
+    task = load_suite("v1").task("stairs", 2)
+    job = EpisodeJob(path, task, 0, task.seeds(1)[0], max_steps=3, secret_hex="ab" * 32)
+    assert run_episode(job)["steps"] == 3
+
+
+@pytest.mark.parametrize("isolation", ["auto", "process"])
+@pytest.mark.parametrize("body, expected", [
+    ("import time\ndef check(self):\n    time.sleep(30)\n", "act() took longer than 1 s at step 0"),
+    ("import os\ndef check(self):\n    os._exit(0)\n", "exited with code 0 at step 0"),
+    ("import ctypes\ndef check(self):\n    ctypes.string_at(0)\n", "crashed (SIGSEGV) at step 0"),
+    ("import os\ndef check(self):\n    os.fork()\n", "act() raised PermissionError at step 0"),
+])
+def test_abnormal_ends_are_one_line_and_leave_no_process(tmp_path, body, expected, isolation):
+    if isolation == "process" and not sandbox.seccomp_available() and "fork" in body:
+        pytest.skip("no seccomp here")
+    path = controller(tmp_path, body)
+    with pytest.raises(sandbox.ControllerError) as err:
+        run_episode(short_job(path, isolation))
+    message = str(err.value)
+    assert expected in message and path in message and "\n" not in message
+    sandbox.close_all()
+    assert no_children_left() == []
+
+
+def test_make_controller_has_a_deadline_enforced_from_outside(tmp_path):
+    path = tmp_path / "hang.py"
+    path.write_text("import time\ndef make_controller(task):\n    while True:\n        time.sleep(1)\n")
+    with pytest.raises(sandbox.ControllerError, match="make_controller took longer than 3 s"):
+        run_episode(short_job(str(path), make_timeout_s=3.0))
+    assert no_children_left() == []
+
+
+def test_memory_is_limited(tmp_path):
+    path = controller(tmp_path, "def check(self):\n    self.hog = bytearray(6 << 30)\n")
+    with pytest.raises(sandbox.ControllerError, match="MemoryError at step 0"):
+        run_episode(short_job(path))
+
+
+def test_sandboxed_and_in_process_episodes_are_identical_and_records_name_the_isolation(tmp_path):
+    tasks = [load_suite("v1").task("rough", 3)]
+    a = evaluate(CPG, tasks, tmp_path / "a", episodes=1, workers=1, record=False, progress=False)
+    b = evaluate(CPG, tasks, tmp_path / "b", episodes=1, workers=1, record=False, progress=False, isolation="none")
+    assert a.record["episodes"] == b.record["episodes"]
+    assert a.record["provenance"]["isolation"]["sandboxed"] is True
+    assert b.record["provenance"]["isolation"] == {"mode": "none", "sandboxed": False}
+
+
+def test_unknown_isolation_and_missing_files_are_one_line(tmp_path):
+    runner = CliRunner()
+    bad = runner.invoke(app, ["run", CPG, "--isolation", "docker", "--out", str(tmp_path / "o")])
+    assert bad.exit_code == 2 and "valid: auto, bubblewrap, process, none" in bad.output
+    res = runner.invoke(app, ["run", str(tmp_path / "missing.py"), CPG, "--terrain", "stairs", "--levels", "2",
+                              "--episodes", "1", "--workers", "1", "--no-record", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 1 and "missing.py: no such controller file" in res.output
+    assert (tmp_path / "o" / "cpg" / "result.json").is_file()  # the other file still ran
+    folder = runner.invoke(app, ["check", str(tmp_path)])
+    assert folder.exit_code == 1 and "is a folder; expected a controller file" in folder.output
+    assert "Traceback" not in folder.output + res.output
+
+
+@pytest.mark.parametrize("make_out", ["file", "readonly", "long"])
+def test_unwritable_outputs_are_one_line_and_leave_nothing(tmp_path, make_out):
+    if make_out == "file":
+        out = tmp_path / "out"
+        out.write_text("not a folder")
+        expect = "exists and is not a folder"
+    elif make_out == "readonly":
+        if os.geteuid() == 0:
+            out = Path("/proc/hexbench-out")  # root ignores permission bits; /proc refuses everyone
+        else:
+            (tmp_path / "ro").mkdir(mode=0o500)
+            out = tmp_path / "ro" / "out"
+        expect = "cannot create the folder"
+    else:
+        out = tmp_path / ("x" * 300)
+        expect = "file name too long"
+    res = CliRunner().invoke(app, ["run", CPG, "--terrain", "stairs", "--levels", "2", "--episodes", "1",
+                                   "--workers", "1", "--no-record", "--out", str(out)])
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code == 1 and len(lines) == 1 and expect in lines[0], res.output
+    assert "Traceback" not in res.output
+
+
+def test_a_failing_run_into_an_existing_folder_keeps_the_earlier_runs_files(tmp_path):
+    out = tmp_path / "out"
+    tasks = [load_suite("v1").task("stairs", 2)]
+    assert evaluate(CPG, tasks, out, episodes=1, workers=1, record=False, progress=False).error is None
+    before = sorted(p.relative_to(out) for p in out.rglob("*"))
+    bad = controller(tmp_path, "def check(self):\n    raise RuntimeError('boom')\n", name="cpg.py")
+    res = evaluate(bad, tasks, out, episodes=1, workers=1, record=False, progress=False)
+    assert res.error and "boom" in res.error
+    assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
+    assert json.loads((out / "result.json").read_text())["label"] == "cpg"
