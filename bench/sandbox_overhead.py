@@ -49,7 +49,7 @@ def timed_run(controller: str, tasks, episodes: int, workers: int, isolation: st
 def round_trip_us(isolation: str, pinned: bool, calls: int = 3000) -> float:
     """Median time of one act() round trip to the open-loop CPG (no work in act) [us]."""
     task = load_suite("v1").task("rough", 3.0)
-    previous = pin_to_core(0) if pinned else None
+    previous = pin_to_core() if pinned else None
     try:
         ctrl = sandbox.controller_for(str(REPO / "baselines" / "cpg.py"), task, isolation)
         obs = np.zeros(62, dtype=np.float32)

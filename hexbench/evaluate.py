@@ -58,6 +58,7 @@ class EpisodeJob:
     isolation: str = "bubblewrap"
     secret_hex: str = ""  # the run secret controller seeds are derived from ("" : a fixed one, for checks)
     make_timeout_s: float = sandbox.DEFAULT_LIMITS.make_timeout_s
+    hidden: tuple[str, ...] = ()  # paths the controller must never see (the run folder, a seed key)
 
     @property
     def episode_id(self) -> str:
@@ -84,7 +85,7 @@ def _make_recorder(job: EpisodeJob, action_mode: str):
 
 def run_episode(job: EpisodeJob) -> dict:
     """Play one episode; return its outcome row. Raises ControllerError for a bad controller."""
-    actor = sandbox.controller_for(job.controller_file, job.task, job.isolation, job.limits)
+    actor = sandbox.controller_for(job.controller_file, job.task, job.isolation, job.limits, job.hidden)
     recorder = _make_recorder(job, actor.action_mode)
     secret = bytes.fromhex(job.secret_hex) if job.secret_hex else b"hexbench-check"
     try:
@@ -158,15 +159,27 @@ def _worker_init(parent_pid: int, next_core=None) -> None:
         pass
 
 
-def pin_to_core(slot: int) -> set[int] | None:
-    """Pin this process (and the controller processes it starts) to one core of its allowed set;
-    return the previous set. Evaluator and controller then share a core: they never run at once,
-    and a round trip on one core costs a few microseconds instead of tens across cores."""
+def pin_to_core(slot: int | None = None) -> set[int] | None:
+    """Pin this process (and the controller processes it starts) to one core of its allowed set:
+    the `slot`-th, or (None) the one it runs on now, so that single-worker runs started side by
+    side do not pile onto one core. Returns the previous set. Evaluator and controller then share
+    a core: they never run at once, and a round trip on one core costs a few microseconds instead
+    of tens across cores."""
     if not hasattr(os, "sched_setaffinity"):
         return None
     allowed = sorted(os.sched_getaffinity(0))
-    os.sched_setaffinity(0, {allowed[slot % len(allowed)]})
+    core = allowed[slot % len(allowed)] if slot is not None else _current_cpu(allowed)
+    os.sched_setaffinity(0, {core})
     return set(allowed)
+
+
+def _current_cpu(allowed: list[int]) -> int:
+    """The CPU this process last ran on (/proc/self/stat field 39), if it is allowed."""
+    try:
+        cpu = int(Path("/proc/self/stat").read_text().rsplit(")", 1)[1].split()[36])
+    except (OSError, ValueError, IndexError):
+        return allowed[0]
+    return cpu if cpu in allowed else allowed[0]
 
 
 # ---------------------------------------------------------------------------------- records
@@ -274,7 +287,8 @@ class RunResult:
     error: str | None = None
 
 
-def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: str, limits) -> dict[str, list[dict]]:
+def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: str, limits,
+                        hidden: tuple[str, ...]) -> dict[str, list[dict]]:
     """Per terrain, path and sha256 of every weights file the controller loads for it.
 
     A controller lists them in an optional `checkpoint_paths` attribute (the trained baselines
@@ -284,7 +298,7 @@ def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: 
     """
     used: dict[str, list[dict]] = {}
     for task in {t.terrain: t for t in reversed(tasks)}.values():
-        ctrl = sandbox.controller_for(controller_file, task, isolation, limits)
+        ctrl = sandbox.controller_for(controller_file, task, isolation, limits, hidden)
         files = {}
         for path in ctrl.checkpoint_paths:
             path = Path(path).resolve()
@@ -411,8 +425,9 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
 def _evaluate(controller_file, tasks, out, episodes, workers, record, label, progress, command, mode, limits, seed_set,
               max_steps, written) -> RunResult:
     # Built once here: a file that fails to import or build fails before any worker starts.
-    weights = _weights_by_terrain(controller_file, tasks, mode, limits)
-    action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits).action_mode
+    hidden = tuple(str(p) for p in (out.resolve(), seed_set.source) if p is not None)
+    weights = _weights_by_terrain(controller_file, tasks, mode, limits, hidden)
+    action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits, hidden).action_mode
     if workers > 1:
         sandbox.close_all()  # the workers start their own controller processes
     checkpoints = sorted({w["path"]: w for ws in weights.values() for w in ws}.values(), key=lambda w: w["path"])
@@ -422,7 +437,7 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
                        f"{started_at}/{os.getpid()}", started_at, time.perf_counter(), written)
     record_dir = str(out / "episodes") if record else None
     jobs = [EpisodeJob(controller_file, t, i, s, record_dir, max_steps=max_steps, log_dir=str(out / "episodes"),
-                       isolation=mode, secret_hex=secret.hex(), make_timeout_s=limits.make_timeout_s)
+                       isolation=mode, secret_hex=secret.hex(), make_timeout_s=limits.make_timeout_s, hidden=hidden)
             for t in tasks for i, s in enumerate(seed_set.seeds(t, episodes))]
     done: dict[str, dict] = {}
     timing: dict[str, tuple[str, str, float]] = {}  # episode id -> (invocation, its start, elapsed [s] at journaling)
@@ -470,7 +485,7 @@ def _play_all(todo: list[EpisodeJob], total: int, workers: int, label: str, prog
                   TimeRemainingColumn(), disable=not progress, transient=False) as bar:
         task_bar = bar.add_task("episodes", total=total, completed=total - len(todo))
         if workers <= 1:
-            previous = pin_to_core(0)
+            previous = pin_to_core()
             try:
                 for job in todo:
                     finished(job, run_episode(job))

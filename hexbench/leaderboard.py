@@ -650,6 +650,22 @@ TRAINING_NOTE = ("Training budget: the stated env-step budget the controller's s
                  "not a like-for-like comparison.")
 
 
+TRUST_NOTE = ("Trust: `sandboxed + replayed` entries were made with the controller in its own sandboxed process "
+              "and admitted by `hexbench leaderboard add RUN_DIR`, which replayed their episodes from the action "
+              "logs alone (all of them, or the stated sample); `+ hidden seeds` were scored on episodes derived "
+              "from a maintainer's secret key; `self-reported` entries were not replayed (records made before "
+              "sandboxing, or added without their run folder) and are ranked alongside but not proven.")
+
+
+def fmt_trust(row: Row) -> str:
+    tier = row.details.get("tier", TIER_SELF_REPORTED)
+    admission = row.details.get("admission") or {}
+    replayed, total = admission.get("episodes_replayed"), admission.get("episodes_total")
+    if tier != TIER_SELF_REPORTED and replayed is not None and total and replayed < total:
+        return f"{tier} ({replayed} of {total} replayed)"
+    return tier
+
+
 def _fmt_checkpoint_steps(training: Training | None) -> str:
     if training is None or not training.known:
         return "?"
@@ -668,22 +684,24 @@ def render_readme(board: Board) -> str:
     out.append("## Ranking\n")
     out.append(RANKING_RULE + "\n")
     if board.measured:
-        header = ["Rank", "Controller", "Training budget [env steps]"]
+        header = ["Rank", "Controller", "Trust", "Training budget [env steps]"]
         for t in suite.terrains:
             header += [f"{TERRAIN_TITLES.get(t, t)}: hardest passed", f"{TERRAIN_TITLES.get(t, t)}: AUC"]
         header += ["Mean speed [m/s]", "Roll RMS [deg]", "Pitch RMS [deg]"]
         rows = []
         for r in board.measured:
             m = overall_metrics(r)
-            cells = [str(board.overall_ranks[r.label]), _md(r.label), fmt_budget(board.training.get(r.label))]
+            cells = [str(board.overall_ranks[r.label]), _md(r.label), fmt_trust(r),
+                     fmt_budget(board.training.get(r.label))]
             for t in suite.terrains:
                 s = r.terrain(t)
                 cells += [fmt_level(s["hardest_level_passed"], s["unit"]), fmt_num(s["auc"])]
             cells += [fmt_num(m["mean_forward_speed_m_per_s"], 3), fmt_num(m["mean_roll_rms_deg"], 1),
                       fmt_num(m["mean_pitch_rms_deg"], 1)]
             rows.append(cells)
-        out.append(_md_table(header, rows, ["r", "l"] + ["r"] * (len(header) - 2)) + "\n")
+        out.append(_md_table(header, rows, ["r", "l", "l"] + ["r"] * (len(header) - 3)) + "\n")
         out.append(TRAINING_NOTE + "\n")
+        out.append(TRUST_NOTE + "\n")
     else:
         out.append("No measured records yet.\n")
     for terrain in suite.terrains:
@@ -737,9 +755,10 @@ def render_readme(board: Board) -> str:
             out.append(f"{_md(citation, block=True)}\n\n{_md(note, block=True)}\n")
     out.append("## Records\n")
     if board.measured:
-        header = ["Controller", "Record", "Controller file", "sha256", "Action mode", "Training budget",
+        header = ["Controller", "Trust", "Record", "Controller file", "sha256", "Action mode", "Training budget",
                   "Shipped checkpoints at [env steps]", "git commit", "Episodes", "Wall time [s]", "Command"]
-        rows = [[_md(r.label), _md(r.source), _md(r.details["controller_file"]), _md(r.details["controller_sha256"][:12]),
+        rows = [[_md(r.label), fmt_trust(r), _md(r.source), _md(r.details["controller_file"]),
+                 _md(r.details["controller_sha256"][:12]),
                  _md(r.details["action_mode"]), fmt_budget(board.training.get(r.label)),
                  _fmt_checkpoint_steps(board.training.get(r.label)), _md(str(r.details["git_commit"])[:12]),
                  str(r.details["episodes"]), f"{r.details['wall_time_s']:.0f}", _md_code(r.details["command"])]
@@ -767,7 +786,7 @@ CSV_COLUMNS = ("kind", "setting", "controller", "record", "overall_rank", "terra
                "headroom", "episodes", "successes", "success_rate", "ci95_low", "ci95_high",
                "level_mean_forward_speed_m_per_s", "terrain_hardest_level_passed", "terrain_auc",
                "terrain_headroom_auc", "terrain_mean_forward_speed_m_per_s", "terrain_mean_roll_rms_deg",
-               "terrain_mean_pitch_rms_deg", "training_env_step_budget", "checkpoint_env_steps")
+               "terrain_mean_pitch_rms_deg", "training_env_step_budget", "checkpoint_env_steps", "trust")
 
 
 def _csv_value(v) -> str:
@@ -814,7 +833,8 @@ def render_csv(board: Board) -> str:
                 lv["success_rate"], lv["ci95_low"], lv["ci95_high"], lv["mean_forward_speed_m_per_s"],
                 t["hardest_level_passed"], t["auc"], t["headroom_auc"], t["mean_forward_speed_m_per_s"],
                 t.get("mean_roll_rms_deg"), t.get("mean_pitch_rms_deg"),
-                *_csv_training(board.training.get(r.label) if measured else None))])
+                *_csv_training(board.training.get(r.label) if measured else None),
+                fmt_trust(r) if measured else "reported")])
     return buf.getvalue()
 
 
@@ -1110,11 +1130,11 @@ def render_html(board: Board) -> str:
         out.append("</section>")
     if board.measured:
         out.append('<section id="records"><h2>Records</h2><table class="records"><thead><tr><th>Controller</th>'
-                   "<th>Record</th><th>Controller file</th><th>sha256</th><th>git commit</th><th>Episodes</th>"
+                   "<th>Trust</th><th>Record</th><th>Controller file</th><th>sha256</th><th>git commit</th><th>Episodes</th>"
                    "<th>Wall time</th><th>Command</th></tr></thead><tbody>")
         for r in board.measured:
             d = r.details
-            out.append(f"<tr><td>{_e(r.label)}</td><td>{_e(r.source)}</td><td><code>{_e(d['controller_file'])}</code>"
+            out.append(f"<tr><td>{_e(r.label)}</td><td>{_e(fmt_trust(r))}</td><td>{_e(r.source)}</td><td><code>{_e(d['controller_file'])}</code>"
                        f"</td><td><code title=\"{_e(d['controller_sha256'])}\">{_e(d['controller_sha256'][:12])}</code>"
                        f"</td><td><code>{_e(str(d['git_commit'])[:12])}</code></td><td>{d['episodes']}</td>"
                        f"<td>{d['wall_time_s']:.0f} s</td><td><code>{_e(d['command'])}</code></td></tr>")
@@ -1207,9 +1227,10 @@ def render_courses_readme(rows: list[Row], suite: Suite) -> str:
             out.append("No records yet.\n")
             continue
         header = ["Controller"] + [f"level {format_level(v)}" for v in levels] + [
-            "Mean speed [m/s]", "Episodes", "Record", "Controller file", "git commit"]
+            "Mean speed [m/s]", "Episodes", "Trust", "Record", "Controller file", "git commit"]
         table = [[_md(r.label)] + [_md_cell(r.level(terrain, v), True) for v in levels] + [
-            fmt_num(r.terrain(terrain)["mean_forward_speed_m_per_s"], 3), str(r.details["episodes"]), _md(r.source),
+            fmt_num(r.terrain(terrain)["mean_forward_speed_m_per_s"], 3), str(r.details["episodes"]), fmt_trust(r),
+            _md(r.source),
             _md(r.details["controller_file"]), _md(str(r.details["git_commit"])[:12])] for r in course_rows]
         out.append(_md_table(header, table) + "\n")
         out.append("Commands:\n")

@@ -170,9 +170,16 @@ def _visible_paths(controller_dir: Path) -> list[Path]:
     import hexbench
     from hexbench.tasks import tasks_dir
 
-    paths = {Path(sys.prefix), Path(sys.base_prefix), Path(sys.exec_prefix), Path(sys.executable).resolve().parent,
-             Path(hexbench.__file__).resolve().parent, tasks_dir().resolve(), controller_dir}
-    paths.update(Path(p) for p in sys.path if p and Path(p).exists())
+    prefixes = {Path(p).resolve() for p in (sys.prefix, sys.base_prefix, sys.exec_prefix)}
+    paths = {*prefixes, Path(sys.executable).resolve().parent, Path(hexbench.__file__).resolve().parent,
+             tasks_dir().resolve(), controller_dir}
+    # sys.path entries of the Python environment only: never the working directory or a source tree
+    # (a repository root holds run folders, seed keys and other people's results)
+    for entry in sys.path:
+        if entry and Path(entry).exists():
+            resolved = Path(entry).resolve()
+            if any(resolved == q or q in resolved.parents for q in prefixes):
+                paths.add(resolved)
     out = []
     for p in sorted({q.resolve() for q in paths if q.exists()}):
         if not any(p != q and q in p.parents for q in out):
@@ -184,7 +191,7 @@ SYSTEM_DIRS = ("/usr", "/bin", "/sbin", "/lib", "/lib64", "/lib32")
 SYSTEM_FILES = ("/etc/ld.so.cache", "/etc/ld.so.conf", "/etc/localtime", "/etc/passwd", "/etc/group")
 
 
-def _bwrap_argv(controller_dir: Path, limits: Limits) -> list[str]:
+def _bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = ()) -> list[str]:
     argv = ["bwrap", "--unshare-all", "--unshare-user", "--uid", str(SANDBOX_UID), "--gid", str(SANDBOX_UID),
             "--cap-drop", "ALL", "--die-with-parent", "--new-session", "--hostname", "sandbox"]
     for d in SYSTEM_DIRS:
@@ -195,8 +202,13 @@ def _bwrap_argv(controller_dir: Path, limits: Limits) -> list[str]:
     for f in SYSTEM_FILES:
         argv += ["--ro-bind-try", f, f]
     argv += ["--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]  # before the binds: a controller may live in /tmp
-    for p in _visible_paths(controller_dir):
+    visible = _visible_paths(controller_dir)
+    for p in visible:
         argv += ["--ro-bind", str(p), str(p)]
+    for h in hidden:  # the run's own folder, a seed key: never visible, even inside a visible folder
+        path = Path(h).resolve()
+        if any(path == v or v in path.parents for v in visible) and path.exists():
+            argv += ["--tmpfs", str(path)] if path.is_dir() else ["--ro-bind", "/dev/null", str(path)]
     argv += ["--size", str(limits.scratch_bytes), "--tmpfs", "/scratch", "--chdir", "/scratch"]
     return argv
 
@@ -239,10 +251,11 @@ def _signal_name(number: int) -> str:
 class ControllerProcess:
     """One sandboxed controller process for one controller file; builds a controller per task."""
 
-    def __init__(self, controller_file: str, isolation: str, limits: Limits = DEFAULT_LIMITS):
+    def __init__(self, controller_file: str, isolation: str, limits: Limits = DEFAULT_LIMITS,
+                 hidden: tuple[str, ...] = ()):
         self.file = str(controller_file)
         self.path = Path(controller_file).resolve()
-        self.isolation, self.limits = isolation, limits
+        self.isolation, self.limits, self.hidden = isolation, limits, hidden
         self.proc: subprocess.Popen | None = None
         self.built: dict[str, RemoteController] = {}
         self._start()
@@ -258,7 +271,7 @@ class ControllerProcess:
                 "on" if seccomp_available() else "off"]
         drop = runs_as_nobody(self.path)
         if self.isolation == "bubblewrap":
-            argv, cwd, env, die = _bwrap_argv(self.path.parent, self.limits) + ["--"] + host, "/", \
+            argv, cwd, env, die = _bwrap_argv(self.path.parent, self.limits, self.hidden) + ["--"] + host, "/", \
                 _clean_env("/scratch"), False
         else:
             scratch = Path(self._tmp) / "scratch"
@@ -585,19 +598,21 @@ _PROCESSES: dict[tuple, ControllerProcess] = {}
 _IN_PROCESS: dict[tuple, InProcessController] = {}
 
 
-def controller_for(controller_file: str, task, isolation: str, limits: Limits = DEFAULT_LIMITS):
+def controller_for(controller_file: str, task, isolation: str, limits: Limits = DEFAULT_LIMITS,
+                   hidden: tuple[str, ...] = ()):
     """The controller for `task` in this worker: one sandboxed process per (file content, isolation),
-    reused across tasks and episodes, or an in-process controller for isolation 'none'."""
+    reused across tasks and episodes, or an in-process controller for isolation 'none'. `hidden`
+    paths (the run folder, a seed key) are covered up inside the sandbox."""
     sha = sha256_file(controller_file) if Path(controller_file).is_file() else ""
     if isolation == "none":
         key = (str(controller_file), sha, task)
         if key not in _IN_PROCESS:
             _IN_PROCESS[key] = InProcessController(controller_file, task, limits)
         return _IN_PROCESS[key]
-    key = (str(controller_file), sha, isolation, limits)
+    key = (str(controller_file), sha, isolation, limits, hidden)
     proc = _PROCESSES.get(key)
     if proc is None or proc.proc is None:
-        proc = _PROCESSES[key] = ControllerProcess(controller_file, isolation, limits)
+        proc = _PROCESSES[key] = ControllerProcess(controller_file, isolation, limits, hidden)
     try:
         return proc.controller_for(task)
     except ControllerError:

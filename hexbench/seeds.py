@@ -35,6 +35,7 @@ class SeedSet:
     """How a run's episode seeds are made: public, or keyed by a secret (only its fingerprint is shown)."""
 
     key: bytes | None = None
+    source: str | None = None  # the key file (kept out of the controller's sight), if read from one
 
     @property
     def kind(self) -> str:
@@ -68,7 +69,7 @@ def read_seed_key(path: str | Path) -> SeedSet:
     if len(key) < MIN_KEY_BYTES:
         raise SeedKeyError(f"{path}: seed key is {len(key)} bytes; use at least {MIN_KEY_BYTES} random bytes "
                            f"(e.g. `head -c 32 /dev/urandom | base64 > key`)")
-    return SeedSet(key)
+    return SeedSet(key, str(Path(path).resolve()))
 
 
 def run_secret(journal_dir: Path) -> bytes:

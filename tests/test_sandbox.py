@@ -184,3 +184,27 @@ def test_a_failing_run_into_an_existing_folder_keeps_the_earlier_runs_files(tmp_
     assert res.error and "boom" in res.error
     assert sorted(p.relative_to(out) for p in out.rglob("*")) == before
     assert json.loads((out / "result.json").read_text())["label"] == "cpg"
+
+
+@needs_bwrap
+def test_the_run_folder_the_seed_key_and_the_working_directory_stay_hidden(tmp_path, monkeypatch):
+    """Even when the run folder and the key file sit inside the controller's own (visible) folder."""
+    monkeypatch.chdir(REPO)
+    key = tmp_path / "seed.key"
+    key.write_bytes(b"s" * 32)
+    path = controller(tmp_path, f'''
+        from pathlib import Path
+        def check(self):
+            out = Path(__file__).with_name("out")
+            assert list(out.iterdir()) == [], "the run folder is visible"
+            try:
+                leaked = Path("{key}").read_bytes()
+            except OSError:
+                leaked = b""
+            assert leaked == b"", "the seed key is visible"
+            assert not Path("{REPO / 'leaderboard' / 'README.md'}").exists(), "the working directory is visible"
+        ''')
+    res = CliRunner().invoke(app, ["run", path, "--terrain", "stairs", "--levels", "2", "--episodes", "1",
+                                   "--workers", "1", "--no-record", "--out", str(tmp_path / "out"),
+                                   "--seed-key", str(key), "--isolation", "bubblewrap"])
+    assert res.exit_code == 0, res.output

@@ -1,0 +1,134 @@
+"""hexbench verify RUN_DIR: replay from action logs alone; forged rows, logs and summaries are named."""
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from hexbench.cli import app
+from hexbench.evaluate import evaluate
+from hexbench.records import episodes_digest
+from hexbench.scoring import summarize_levels, summarize_terrains
+from hexbench.seeds import SeedSet
+from hexbench.tasks import load_suite
+from hexbench.verify import verify_run
+
+REPO = Path(__file__).resolve().parent.parent
+CPG = str(REPO / "baselines" / "cpg.py")
+
+
+@pytest.fixture
+def run(tmp_path_factory, tiny_protocol):
+    """A run of 2 short episodes on each of two tasks of the tiny protocol (tests/conftest.py)."""
+    tasks = [load_suite("v1").task("stairs", 2), load_suite("v1").task("rough", 3)]
+    out = tmp_path_factory.mktemp("verify") / "run"
+    res = evaluate(CPG, tasks, out, workers=1, record=False, progress=False)
+    assert res.error is None
+    return out
+
+
+def _copy(run: Path, tmp_path: Path) -> Path:
+    dst = tmp_path / "run"
+    shutil.copytree(run, dst)
+    return dst
+
+
+def _resummarize(record: dict) -> None:
+    units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
+    headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
+    record["levels"] = summarize_levels(record["episodes"], units, headroom)
+    record["terrains"] = summarize_terrains(record["levels"])
+    record["episodes_digest"] = episodes_digest(record["episodes"])
+
+
+def test_an_honest_run_verifies_from_any_directory(run, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = CliRunner().invoke(app, ["verify", str(run), "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    assert "all 4 episodes replay exactly" in res.output
+
+
+def test_a_self_consistent_forged_row_is_caught_by_replay(run, tmp_path):
+    forged = _copy(run, tmp_path)
+    record = json.loads((forged / "result.json").read_text())
+    record["episodes"][1]["progress_m"] += 0.5
+    _resummarize(record)
+    (forged / "result.json").write_text(json.dumps(record))
+    report = verify_run(forged)
+    assert not report.ok and "progress_m: recorded" in report.message and "episode 1" in report.message
+
+
+def test_an_edited_summary_or_digest_is_named(run, tmp_path):
+    forged = _copy(run, tmp_path)
+    record = json.loads((forged / "result.json").read_text())
+    record["episodes_digest"] = "0" * 64
+    (forged / "result.json").write_text(json.dumps(record))
+    assert "digest does not match" in verify_run(forged).message
+
+
+def test_a_flipped_or_missing_action_log_is_named(run, tmp_path):
+    forged = _copy(run, tmp_path)
+    log = sorted((forged / "episodes").glob("*.actions"))[0]
+    data = bytearray(log.read_bytes())
+    data[-5] ^= 0x01
+    log.write_bytes(bytes(data))
+    report = verify_run(forged)
+    assert not report.ok and "sha256 differs" in report.message
+    log.unlink()
+    assert "cannot be read" in verify_run(forged).message
+
+
+def test_a_replaced_log_with_its_hash_updated_is_caught(run, tmp_path):
+    """Swap two episodes' logs and fix the rows' hashes: the logs belong to other episodes."""
+    forged = _copy(run, tmp_path)
+    record = json.loads((forged / "result.json").read_text())
+    a, b = record["episodes"][0], record["episodes"][1]
+    a["action_log_path"], b["action_log_path"] = b["action_log_path"], a["action_log_path"]
+    a["action_log_sha256"], b["action_log_sha256"] = b["action_log_sha256"], a["action_log_sha256"]
+    _resummarize(record)
+    (forged / "result.json").write_text(json.dumps(record))
+    assert "belongs to another episode" in verify_run(forged).message
+
+
+def test_not_a_run_folder_is_one_line(tmp_path):
+    res = CliRunner().invoke(app, ["verify", str(tmp_path)])
+    assert res.exit_code == 2 and "is" in res.output and "a run folder" in res.output
+    assert len([ln for ln in res.output.splitlines() if ln.strip()]) == 1
+
+
+def test_keyed_seed_sets_are_hidden_and_checked_with_the_key(tmp_path, tiny_protocol):
+    key = tmp_path / "key"
+    key.write_bytes(b"k" * 32)
+    tasks = [load_suite("v1").task("stairs", 2)]
+    out = tmp_path / "keyed"
+    res = CliRunner().invoke(app, ["run", CPG, "--terrain", "stairs", "--levels", "2", "--episodes", "2",
+                                   "--workers", "1", "--no-record", "--out", str(out), "--seed-key", str(key)])
+    assert res.exit_code == 0, res.output
+    record = json.loads((out / "result.json").read_text())
+    seeds = [e["seed"] for e in record["episodes"]]
+    assert not set(seeds) & set(tasks[0].seeds(20))  # not the public episodes
+    assert seeds == SeedSet(b"k" * 32).seeds(tasks[0], 2)
+    assert record["provenance"]["seed_set"] == {"kind": "keyed", "key_fingerprint": SeedSet(b"k" * 32).fingerprint()}
+    assert "k" * 32 not in (out / "result.json").read_text()
+    assert verify_run(out, seed_set=SeedSet(b"k" * 32)).ok
+    assert "fingerprint differs" in verify_run(out, seed_set=SeedSet(b"x" * 32)).message
+    short = tmp_path / "short"
+    short.write_bytes(b"abc")
+    bad = CliRunner().invoke(app, ["run", CPG, "--seed-key", str(short), "--out", str(tmp_path / "o")])
+    assert bad.exit_code == 2 and "at least 16 random bytes" in bad.output
+
+
+def test_resume_takes_a_journal_entry_only_if_its_action_log_replays_into_it(tmp_path, tiny_protocol):
+    tasks = [load_suite("v1").task("stairs", 2)]
+    out = tmp_path / "run"
+    first = evaluate(CPG, tasks, out, workers=1, record=False, progress=False)
+    entry_file = sorted((out / ".journal").glob("stairs-*.json"))[0]
+    entry = json.loads(entry_file.read_text())
+    honest = entry["row"]["progress_m"]
+    entry["row"]["progress_m"] = honest + 2.0  # a planted row: the log does not replay into it
+    entry_file.write_text(json.dumps(entry))
+    again = evaluate(CPG, tasks, out, workers=1, record=False, progress=False)
+    assert again.record["episodes"] == first.record["episodes"]  # the planted row was re-run, not taken
+    assert json.loads(entry_file.read_text())["row"]["progress_m"] == honest
