@@ -178,7 +178,8 @@ def _visible_paths(controller_dir: Path) -> list[Path]:
     for entry in sys.path:
         if entry and Path(entry).exists():
             resolved = Path(entry).resolve()
-            if any(resolved == q or q in resolved.parents for q in prefixes):
+            if any(resolved == q or q in resolved.parents for q in prefixes) \
+                    or resolved.name in ("site-packages", "dist-packages"):
                 paths.add(resolved)
     out = []
     for p in sorted({q.resolve() for q in paths if q.exists()}):
