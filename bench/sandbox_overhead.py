@@ -5,7 +5,9 @@
 
 The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
 else process) and in-process (`--isolation none`), alternating A/B/A/B in one run so that load
-drifts hit both alike; the ratio is sandboxed / in-process wall time, per round and overall.
+drifts hit both alike; the ratio is sandboxed / in-process wall time, per round and overall, and
+the same for CPU time (the evaluator, its workers and the controller processes: robust when the
+machine is shared).
 Both runs must give identical episode rows (the sandbox changes where the controller runs, never
 what it does). Then the action-log bytes per episode (always written) and per control step.
 Also the evaluator <-> controller round trip for one act() call, with the two processes on one
@@ -18,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import tempfile
 import time
@@ -33,17 +36,25 @@ REPO = Path(__file__).resolve().parent.parent
 LEVELS = (("rough", 3.0), ("rough", 11.0), ("slopes", 6.0), ("slopes", 20.0), ("stairs", 2.0), ("stairs", 8.0))
 
 
-def timed_run(controller: str, tasks, episodes: int, workers: int, isolation: str) -> tuple[float, dict, list[int]]:
+def cpu_seconds() -> float:
+    """CPU time of this process and of every finished descendant it waited for (workers, controller processes)."""
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
+def timed_run(controller: str, tasks, episodes: int, workers: int, isolation: str) -> tuple[float, float, dict, list[int]]:
     with tempfile.TemporaryDirectory() as d:
+        c0 = cpu_seconds()
         t0 = time.perf_counter()
         res = evaluate(controller, tasks, Path(d) / "run", episodes=episodes, workers=workers, record=False,
                        progress=False, command="bench/sandbox_overhead.py", isolation=isolation)
         wall = time.perf_counter() - t0
+        cpu = cpu_seconds() - c0
         if res.error:
             raise SystemExit(res.error)
         sizes = [(Path(d) / "run" / "episodes" / r["action_log_path"]).stat().st_size
                  for r in res.record["episodes"] if r.get("action_log_path")]
-    return wall, res.record, sizes
+    return wall, cpu, res.record, sizes
 
 
 def round_trip_us(isolation: str, pinned: bool, calls: int = 3000) -> float:
@@ -77,23 +88,27 @@ def main() -> None:
     tasks = [suite.task(t, lv) for t, lv in LEVELS]
     mode = sandbox.resolve_isolation("auto")
     walls: dict[str, list[float]] = {mode: [], "none": []}
+    cpus: dict[str, list[float]] = {mode: [], "none": []}
     rows: dict[str, list] = {}
     sizes: list[int] = []
     steps: list[int] = []
     for k in range(args.rounds):
         for isolation in ((mode, "none") if k % 2 == 0 else ("none", mode)):
-            wall, record, log_sizes = timed_run(args.controller, tasks, args.episodes, args.workers, isolation)
+            wall, cpu, record, log_sizes = timed_run(args.controller, tasks, args.episodes, args.workers, isolation)
             walls[isolation].append(wall)
+            cpus[isolation].append(cpu)
             outcome = [{k2: v for k2, v in r.items() if not k2.startswith("action_log")} for r in record["episodes"]]
             rows.setdefault(isolation, outcome)
             if isolation == mode:
                 sizes, steps = log_sizes, [r["steps"] for r in record["episodes"]]
-            print(f"round {k + 1}: {isolation:<10} {wall:7.1f} s")
+            print(f"round {k + 1}: {isolation:<10} {wall:7.1f} s wall, {cpu:7.1f} s CPU", flush=True)
     identical = rows[mode] == rows["none"]
     ratio = sum(walls[mode]) / sum(walls["none"])
     per_round = [a / b for a, b in zip(walls[mode], walls["none"])]
+    cpu_ratio = sum(cpus[mode]) / sum(cpus["none"])
     print(f"sandboxed ({mode}) / in-process wall time: {ratio:.3f} overall; per round "
           + ", ".join(f"{r:.3f}" for r in per_round) + f"; rows identical: {identical}")
+    print(f"sandboxed / in-process CPU time (evaluator, workers and controller processes): {cpu_ratio:.3f}")
     per_step = [s / n for s, n in zip(sizes, steps)]
     print(f"action log per episode: mean {statistics.mean(sizes) / 1e3:.1f} kB, median "
           f"{statistics.median(sizes) / 1e3:.1f} kB, max {max(sizes) / 1e3:.1f} kB "
@@ -106,7 +121,7 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     (out / "sandbox_overhead.json").write_text(json.dumps({
         "controller": args.controller, "isolation": mode, "episodes_per_level": args.episodes, "levels": LEVELS,
-        "workers": args.workers, "wall_time_s": walls, "ratio": ratio, "ratio_per_round": per_round,
+        "workers": args.workers, "wall_time_s": walls, "cpu_time_s": cpus, "cpu_ratio": cpu_ratio, "ratio": ratio, "ratio_per_round": per_round,
         "rows_identical": identical, "action_log_bytes": sizes, "episode_steps": steps,
         "act_round_trip_us": trips, "load_average_at_end": os.getloadavg()}, indent=1))
 

@@ -70,7 +70,8 @@ class Limits:
     file_size_bytes: int = 64 << 20  # largest file it may write (in its scratch folder)
     scratch_bytes: int = 256 << 20  # size of the scratch folder (bubblewrap's tmpfs)
     make_timeout_s: float = 120.0  # start-up, import and make_controller(task) [s]
-    call_timeout_s: float = 1.0  # reset(), act() and see() each (protocol v1) [s]
+    call_timeout_s: float = 1.0  # CPU time of the controller's process tree per reset(), act() or see() (protocol v1) [s]
+    call_wall_timeout_s: float = 10.0  # wall time per call, for controllers that wait instead of computing [s]
 
 
 DEFAULT_LIMITS = Limits()
@@ -242,6 +243,33 @@ def _preexec(limits: Limits, drop_to_nobody: bool, die_with_parent: bool):
     return run
 
 
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+CPU_SAMPLE_EVERY_CALLS = 64  # how often the controller's CPU time is sampled (the sample a slow call is measured from)
+
+
+class _Deadline:
+    """When to give up on an answer: CPU time of the controller (from the latest sample: at most
+    CPU_SAMPLE_EVERY_CALLS calls old, so it may include a few ms of earlier calls) and wall time."""
+
+    def __init__(self, process: "ControllerProcess", cpu_s: float | None, wall_s: float):
+        self.process, self.cpu_s, self.wall_s = process, cpu_s, wall_s
+        self.start = time.monotonic()
+        self.expired_on_cpu = False
+
+    def wait_s(self) -> float:
+        """Seconds to wait before checking again; 0 when expired."""
+        elapsed = time.monotonic() - self.start
+        if elapsed >= self.wall_s:
+            return 0.0
+        if self.cpu_s is None or elapsed < self.cpu_s:
+            return min(self.wall_s, self.cpu_s or self.wall_s) - elapsed
+        used = self.process.cpu_seconds() - self.process._cpu_sample
+        if used >= self.cpu_s:
+            self.expired_on_cpu = True
+            return 0.0
+        return min(0.1, self.wall_s - elapsed)
+
+
 def _signal_name(number: int) -> str:
     try:
         return signal.Signals(number).name
@@ -259,6 +287,7 @@ class ControllerProcess:
         self.isolation, self.limits, self.hidden = isolation, limits, hidden
         self.proc: subprocess.Popen | None = None
         self.built: dict[str, RemoteController] = {}
+        self._calls, self._cpu_sample = 0, 0.0
         self._start()
 
     def _start(self) -> None:
@@ -332,12 +361,31 @@ class ControllerProcess:
         lines = [line for line in lines if line]
         return lines[-1][:300] if lines else ""
 
-    def _send(self, data: bytes, deadline: float, context: str) -> None:
+    def cpu_seconds(self) -> float:
+        """CPU time [s] used so far by the controller's process tree (bubblewrap and everything below it)."""
+        total, pending, seen = 0, [self.proc.pid], set()
+        while pending:
+            pid = pending.pop()
+            if pid in seen:
+                continue
+            seen.add(pid)
+            try:
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += int(fields[11]) + int(fields[12])  # utime, stime [clock ticks]
+                for task in Path(f"/proc/{pid}/task").iterdir():
+                    pending += [int(c) for c in (task / "children").read_text().split()]
+            except (OSError, ValueError, IndexError):
+                continue
+        return total / _CLOCK_TICKS
+
+    def _send(self, data: bytes, deadline: _Deadline, context: str) -> None:
         view = memoryview(data)
         while view:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0 or not self._poll_out.poll(max(1, int(remaining * 1000))):
+            wait_s = deadline.wait_s()
+            if wait_s <= 0:
                 raise TimeoutError
+            if not self._poll_out.poll(max(1, math.ceil(wait_s * 1000))):
+                continue
             try:
                 view = view[os.write(self._to_child, view):]
             except BlockingIOError:
@@ -345,12 +393,14 @@ class ControllerProcess:
             except (BrokenPipeError, OSError):
                 raise self._died(context) from None
 
-    def _read(self, n: int, deadline: float, context: str) -> bytes:
+    def _read(self, n: int, deadline: _Deadline, context: str) -> bytes:
         chunks, got = [], 0
         while got < n:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0 or not self._poll_in.poll(max(1, math.ceil(remaining * 1000))):
+            wait_s = deadline.wait_s()
+            if wait_s <= 0:
                 raise TimeoutError
+            if not self._poll_in.poll(max(1, math.ceil(wait_s * 1000))):
+                continue
             chunk = os.read(self._from_child, n - got)
             if not chunk:
                 raise self._died(context)
@@ -358,11 +408,21 @@ class ControllerProcess:
             got += len(chunk)
         return b"".join(chunks)
 
-    def call(self, kind: bytes, payload: bytes, timeout_s: float, what: str, context: str) -> tuple[bytes, bytes]:
-        """Send one message and wait for the answer; any failure kills the process and is one ControllerError."""
+    def call(self, kind: bytes, payload: bytes, timeout_s: float, what: str, context: str,
+             cpu_limited: bool = True) -> tuple[bytes, bytes]:
+        """Send one message and wait for the answer; any failure kills the process and is one ControllerError.
+
+        cpu_limited: the answer may cost the controller `timeout_s` of CPU time and take at most
+        `call_wall_timeout_s` of wall time (a loaded machine does not fail an honest controller;
+        a sleeping one is still stopped); otherwise `timeout_s` is wall time (start-up, make_controller).
+        """
         if self.proc is None:
             raise ControllerError(f"{self.file}: the controller process has already been stopped")
-        deadline = time.monotonic() + timeout_s
+        self._calls += 1
+        if cpu_limited and self._calls % CPU_SAMPLE_EVERY_CALLS == 1:
+            self._cpu_sample = self.cpu_seconds()
+        deadline = _Deadline(self, timeout_s if cpu_limited else None,
+                             self.limits.call_wall_timeout_s if cpu_limited else timeout_s)
         try:
             self._send(wire.frame(kind, payload), deadline, context)
             length, answer = wire.HEADER.unpack(self._read(wire.HEADER.size, deadline, context))
@@ -371,7 +431,8 @@ class ControllerProcess:
                                  context)
             body = self._read(length, deadline, context) if length else b""
         except TimeoutError:
-            raise self._fail(f"{what} took longer than {timeout_s:g} s", context + " (controller process killed)") from None
+            limit = f"{timeout_s:g} s of CPU time" if deadline.expired_on_cpu else f"{deadline.wall_s:g} s"
+            raise self._fail(f"{what} took longer than {limit}", context + " (controller process killed)") from None
         answer = bytes([answer])
         if answer == wire.ERROR:
             try:
@@ -393,7 +454,7 @@ class ControllerProcess:
         if task.name not in self.built:
             context = "during start-up" if not self.built else f"for {task.name}"
             _, body = self.call(wire.MAKE, wire.json_payload({"file": str(self.path), "task": dataclasses.asdict(task)}),
-                                self.limits.make_timeout_s, "make_controller", context)
+                                self.limits.make_timeout_s, "make_controller", context, cpu_limited=False)
             try:
                 info = json.loads(body)
             except ValueError:
@@ -422,11 +483,13 @@ class ControllerProcess:
         self._stderr.close()
         shutil.rmtree(self._tmp, ignore_errors=True)
 
-    def close(self) -> None:
+    def close(self, grace_s: float = 2.0) -> None:
+        """Ask the controller process to quit, give it `grace_s` to exit, then kill whatever is left."""
         if self.proc is not None:
             try:
                 os.write(self._to_child, wire.frame(wire.QUIT))
-            except OSError:
+                self.proc.wait(timeout=grace_s)
+            except (OSError, subprocess.TimeoutExpired):
                 pass
         self.kill()
 

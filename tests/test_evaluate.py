@@ -32,7 +32,7 @@ BROKEN_CASES = {
     "nan_action.py": "NaN",
     "wrong_dtype.py": "dtype is int64",
     "returns_none.py": "act() returned None",
-    "slow_act.py": "act() took longer than 1 s at step 2",
+    "slow_act.py": "act() took longer than 1 s of CPU time at step 2",
     "out_of_bounds.py": "outside [-1, 1]",
     "returns_list.py": "act() returned list",
     "bad_action_mode.py": "action_mode is 'torque'; valid modes: joint, cpg_residual, cpg_params",

@@ -5,6 +5,7 @@ import os
 import textwrap
 from pathlib import Path
 
+import numpy as np
 import psutil
 import pytest
 from typer.testing import CliRunner
@@ -98,7 +99,8 @@ def test_reset_gets_a_derived_seed_never_the_episode_seed(tmp_path):
 
 @pytest.mark.parametrize("isolation", ["auto", "process"])
 @pytest.mark.parametrize("body, expected", [
-    ("import time\ndef check(self):\n    time.sleep(30)\n", "act() took longer than 1 s at step 0"),
+    ("import time\ndef check(self):\n    end = time.monotonic() + 30\n    while time.monotonic() < end:\n        pass\n",
+     "act() took longer than 1 s of CPU time at step 0"),
     ("import os\ndef check(self):\n    os._exit(0)\n", "exited with code 0 at step 0"),
     ("import ctypes\ndef check(self):\n    ctypes.string_at(0)\n", "crashed (SIGSEGV) at step 0"),
     ("import os\ndef check(self):\n    os.fork()\n", "act() raised PermissionError at step 0"),
@@ -113,6 +115,23 @@ def test_abnormal_ends_are_one_line_and_leave_no_process(tmp_path, body, expecte
     assert expected in message and path in message and "\n" not in message
     sandbox.close_all()
     assert no_children_left() == []
+
+
+def test_a_waiting_controller_is_stopped_by_the_wall_time_limit_and_a_busy_machine_fails_no_one(tmp_path):
+    """act() may use 1 s of CPU time; one that sleeps is stopped after call_wall_timeout_s of wall time."""
+    sleeper = controller(tmp_path, "import time\ndef check(self):\n    time.sleep(60)\n")
+    with pytest.raises(sandbox.ControllerError, match=r"act\(\) took longer than 3 s at step 0"):
+        process = sandbox.ControllerProcess(sleeper, sandbox.resolve_isolation("auto"),
+                                            sandbox.Limits(call_wall_timeout_s=3.0))
+        try:
+            ctrl = process.controller_for(load_suite("v1").task("stairs", 2))
+            ctrl.reset(0)
+            ctrl.act(np.zeros(62, np.float32), 0)
+        finally:
+            process.close()
+    # a short wait (1.5 s of wall time, no CPU) is within the limits
+    napper = controller(tmp_path, "import time\ndef check(self):\n    time.sleep(1.5)\n", name="napper.py")
+    assert run_episode(short_job(napper, steps=2))["steps"] == 2
 
 
 def test_make_controller_has_a_deadline_enforced_from_outside(tmp_path):

@@ -14,8 +14,10 @@ class Broken:
 
     def act(self, obs):
         self.step += 1
-        if self.step == 3:
-            time.sleep(5)
+        if self.step == 3:  # busy for 5 s: over the 1 s of CPU time an act() may use
+            end = time.monotonic() + 5
+            while time.monotonic() < end:
+                pass
         return np.zeros(18, dtype=np.float32)
 
 
