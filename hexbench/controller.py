@@ -26,7 +26,6 @@ image is rendered by PyBullet's CPU renderer with every terrain body painted `CA
 
 from __future__ import annotations
 
-import hashlib
 import importlib.util
 import sys
 import uuid
@@ -37,6 +36,7 @@ import numpy as np
 
 from hexbench.env import ACTION_MODES
 from hexbench.errors import HexbenchError
+from hexbench.files import sha256_file
 
 
 @runtime_checkable
@@ -64,7 +64,7 @@ class ControllerError(HexbenchError):
 
 
 def file_sha256(path: str | Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+    return sha256_file(path)
 
 
 def load_controller_module(path: str | Path):
@@ -115,9 +115,13 @@ def check_action(action, expected_dim: int, where: str) -> np.ndarray:
     type_name = getattr(action, "type_name", None)
     if action is None or type_name == "NoneType":
         raise ControllerError(f"{where}: act() returned None; expected a float array of shape ({expected_dim},)")
-    if type_name is not None or not isinstance(action, np.ndarray) and not hasattr(action, "dtype"):
+    if type_name is not None or not isinstance(action, np.ndarray) and not hasattr(action, "dtype") \
+            and not hasattr(action, "shape_only"):
         name = type_name or type(action).__name__
         raise ControllerError(f"{where}: act() returned {name}; expected a numpy float array of shape ({expected_dim},)")
+    shape_only = getattr(action, "shape_only", None)
+    if shape_only is not None:  # WrongShape stand-in: a float array too large to send
+        raise ControllerError(f"{where}: action shape is {shape_only}; expected ({expected_dim},)")
     dtype = getattr(action, "dtype", None)
     if not isinstance(action, np.ndarray):  # WrongDtype stand-in
         raise ControllerError(f"{where}: action dtype is {dtype}; expected float32 or float64")

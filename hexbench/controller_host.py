@@ -70,8 +70,11 @@ def action_message(action) -> bytes:
     if not isinstance(action, np.ndarray):
         return wire.array_payload({"type": type(action).__name__}, b"")
     plain = np.ndarray.view(action, np.ndarray)
-    if plain.dtype.kind != "f" or plain.dtype.itemsize not in (4, 8) or plain.size > 4096:
+    if plain.dtype.kind != "f" or plain.dtype.itemsize not in (4, 8):
         return wire.array_payload({"type": "ndarray", "dtype": str(plain.dtype), "shape": list(plain.shape)}, b"")
+    if plain.size > 4096:  # far beyond any action: its shape says enough
+        return wire.array_payload({"type": "ndarray", "dtype": f"<f{plain.dtype.itemsize}",
+                                   "shape": list(plain.shape)[:8], "truncated": True}, b"")
     data = np.ascontiguousarray(plain, dtype=plain.dtype.newbyteorder("<"))
     return wire.array_payload({"type": "ndarray", "dtype": f"<f{plain.dtype.itemsize}", "shape": list(plain.shape)},
                               data.tobytes())
@@ -94,8 +97,9 @@ class Host:
         if self.module is None:
             self.module = load_controller_module(request["file"])  # ControllerError: one line, sent as ERROR
         task = TaskSpec(**request["task"])
+        name = task.name  # taken before the controller sees (and could change) the task
         ctrl = self.module.make_controller(task)
-        self.controllers[task.name] = ctrl
+        self.controllers[name] = ctrl
         self.send(wire.OK, wire.json_payload(declared(ctrl)))
 
     def handle(self, kind: bytes, payload: bytes) -> None:

@@ -365,11 +365,11 @@ class _Journal:
         return elapsed_s
 
 
-def _prepare_out(out: Path) -> bool:
-    """Make OUT and OUT/.journal (owner-only); True if OUT was created by this call. One OutputError line
-    for a read-only folder, a file in the way or a name too long."""
+def _prepare_out(out: Path) -> list[Path]:
+    """Make OUT, OUT/.journal (owner-only) and OUT/episodes; return the folders this call created
+    (outermost first). One OutputError line for a read-only folder, a file in the way or a name too long."""
     try:
-        created = not out.exists()
+        created = [p for p in (out, out / ".journal", out / "episodes") if not p.exists()]
         is_file = out.exists() and not out.is_dir()
     except OSError as e:  # e.g. a name too long for the file system
         raise OutputError(f"{out}: cannot be used as the output folder ({os_reason(e)})") from None
@@ -387,14 +387,23 @@ def _prepare_out(out: Path) -> bool:
     return created
 
 
-def _remove_written(paths: list[Path], out: Path, created_out: bool) -> None:
+def _remove_written(paths: list[Path], out: Path, created: list[Path]) -> None:
+    """Remove the files this invocation wrote and the folders it created, never anything else."""
     for f in paths:
         try:
             f.unlink(missing_ok=True)
         except OSError:
             pass
-    if created_out:
+    if out in created:
         shutil.rmtree(out, ignore_errors=True)
+        return
+    for folder in reversed(created):
+        if folder == out / ".journal":  # made now, so its run secret is this invocation's too
+            (folder / "run_secret").unlink(missing_ok=True)
+        try:
+            folder.rmdir()  # only if empty
+        except OSError:
+            pass
 
 
 def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | Path, *, episodes: int | None = None,
@@ -410,13 +419,13 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     limits = sandbox.Limits(make_timeout_s=make_timeout_s)
     if not Path(controller_file).is_file():
         raise ControllerError(f"{controller_file}: no such controller file")
-    created_out = _prepare_out(out)
+    created = _prepare_out(out)
     written: list[Path] = []
     try:
         return _evaluate(controller_file, tasks, out, episodes, workers, record, label, progress, command, mode, limits,
                          seed_set, max_steps, written)
     except HexbenchError as e:
-        _remove_written(written, out, created_out)
+        _remove_written(written, out, created)
         return RunResult(None, out, str(e))
     finally:
         sandbox.close_all()
@@ -425,7 +434,9 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
 def _evaluate(controller_file, tasks, out, episodes, workers, record, label, progress, command, mode, limits, seed_set,
               max_steps, written) -> RunResult:
     # Built once here: a file that fails to import or build fails before any worker starts.
-    hidden = tuple(str(p) for p in (out.resolve(), seed_set.source) if p is not None)
+    # the journal (run secret) and the logs are hidden from the controller, and so is a seed key
+    hidden = tuple(str(p) for p in (out.resolve() / ".journal", out.resolve() / "episodes", seed_set.source)
+                   if p is not None)
     weights = _weights_by_terrain(controller_file, tasks, mode, limits, hidden)
     action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits, hidden).action_mode
     if workers > 1:

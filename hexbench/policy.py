@@ -27,13 +27,13 @@ Checkpoints. Nothing is unpickled from a file whose sha256 was not checked first
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import asdict, fields, is_dataclass
 from pathlib import Path
 
 import numpy as np
 
+from hexbench import files
 from hexbench.env import ACTION_MODES, OBS_DIM
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
@@ -149,12 +149,7 @@ def build_policy(config):
 
 
 # ----------------------------------------------------------------------------- checkpoints
-def sha256_file(path: str | Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
+sha256_file = files.sha256_file
 
 
 def read_manifest(checkpoints_dir: Path) -> dict:

@@ -58,6 +58,11 @@ from hexbench.files import sha256_file
 ISOLATIONS: tuple[str, ...] = ("bubblewrap", "process", "none")
 SANDBOX_UID = 65534  # nobody
 MAX_CAMERA_PIXELS = 640 * 480  # largest camera image a controller may ask the evaluator to render
+# Camera spec bounds: rendering happens in the evaluator, outside every deadline, and TinyRenderer
+# hangs on a degenerate projection (a field of view of 1e-6 deg), so a spec must be a sane camera.
+CAMERA_BOUNDS: dict[str, tuple[float, float]] = {
+    "fov_deg": (10.0, 170.0), "mount_forward_m": (-1.0, 1.0), "mount_up_m": (-1.0, 1.0),
+    "pitch_down_deg": (-90.0, 90.0), "near_m": (0.005, 1.0), "far_m": (0.1, 50.0)}
 
 
 @dataclass(frozen=True)
@@ -69,6 +74,7 @@ class Limits:
     open_files: int = 256
     file_size_bytes: int = 64 << 20  # largest file it may write (in its scratch folder)
     scratch_bytes: int = 256 << 20  # size of the scratch folder (bubblewrap's tmpfs)
+    small_tmpfs_bytes: int = 16 << 20  # size of /tmp and /dev/shm in the sandbox
     make_timeout_s: float = 120.0  # start-up, import and make_controller(task) [s]
     call_timeout_s: float = 1.0  # CPU time of the controller's process tree per reset(), act() or see() (protocol v1) [s]
     call_wall_timeout_s: float = 10.0  # wall time per call, for controllers that wait instead of computing [s]
@@ -203,14 +209,19 @@ def _bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = 
             argv += ["--ro-bind", d, d]
     for f in SYSTEM_FILES:
         argv += ["--ro-bind-try", f, f]
-    argv += ["--proc", "/proc", "--dev", "/dev", "--tmpfs", "/tmp"]  # before the binds: a controller may live in /tmp
+    # before the binds (a controller may live in /tmp); every writable tmpfs is sized: RAM written
+    # there is not counted by the address-space limit
+    small = str(limits.small_tmpfs_bytes)
+    argv += ["--proc", "/proc", "--dev", "/dev", "--size", small, "--tmpfs", "/dev/shm", "--size", small, "--tmpfs", "/tmp"]
     visible = _visible_paths(controller_dir)
     for p in visible:
         argv += ["--ro-bind", str(p), str(p)]
-    for h in hidden:  # the run's own folder, a seed key: never visible, even inside a visible folder
+    for h in hidden:  # the run's journal and logs, a seed key: never visible, even inside a visible folder
         path = Path(h).resolve()
+        if path == controller_dir or path in controller_dir.parents:
+            continue  # the controller's own folder stays visible (the caller hides what lies inside it)
         if any(path == v or v in path.parents for v in visible) and path.exists():
-            argv += ["--tmpfs", str(path)] if path.is_dir() else ["--ro-bind", "/dev/null", str(path)]
+            argv += ["--size", "4096", "--tmpfs", str(path)] if path.is_dir() else ["--ro-bind", "/dev/null", str(path)]
     argv += ["--size", str(limits.scratch_bytes), "--tmpfs", "/scratch", "--chdir", "/scratch"]
     return argv
 
@@ -438,7 +449,7 @@ class ControllerProcess:
             try:
                 error = json.loads(body)
                 kind, message = _one_line(str(error["type"]), 100), _one_line(str(error["message"]))
-            except (ValueError, KeyError, TypeError):
+            except (ValueError, KeyError, TypeError, RecursionError):
                 raise self._fail("sent a malformed error message", context) from None
             if what == "make_controller":
                 if kind == "ControllerError":  # loading the file failed: that line says it all
@@ -457,9 +468,15 @@ class ControllerProcess:
                                 self.limits.make_timeout_s, "make_controller", context, cpu_limited=False)
             try:
                 info = json.loads(body)
-            except ValueError:
-                raise self._fail("sent a malformed reply to make_controller", context) from None
-            self.built[task.name] = RemoteController(self, task, info)
+            except (ValueError, RecursionError):
+                info = None
+            if not isinstance(info, dict):
+                raise self._fail("sent a malformed reply to make_controller", context)
+            try:
+                self.built[task.name] = RemoteController(self, task, info)
+            except (TypeError, ValueError, AttributeError, KeyError, RecursionError):
+                raise self._fail("sent a malformed reply to make_controller (types of its declared attributes)",
+                                 context) from None
         return self.built[task.name]
 
     def kill(self) -> None:
@@ -506,7 +523,8 @@ def _camera_from(info: dict, where: str):
     if info.get("camera_type") is None or not info.get("has_see"):
         return None
     if info["camera_type"] != "hexbench.camera.CameraSpec" or not isinstance(info.get("camera"), dict):
-        raise ControllerError(f"{where}: camera is a {info['camera_type'].rsplit('.', 1)[-1]}; expected hexbench.camera.CameraSpec")
+        shown = str(info["camera_type"]).rsplit(".", 1)[-1][:60]
+        raise ControllerError(f"{where}: camera is a {shown}; expected hexbench.camera.CameraSpec")
     fields = dict(info["camera"])
     try:
         if fields.get("lighting") is not None:
@@ -516,11 +534,19 @@ def _camera_from(info: dict, where: str):
         numbers = [v for k, v in fields.items() if k != "lighting"]
         ok = all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in numbers)
         ok = ok and isinstance(camera.width_px, int) and isinstance(camera.height_px, int) \
-            and 1 <= camera.width_px * camera.height_px <= MAX_CAMERA_PIXELS and min(camera.width_px, camera.height_px) >= 1
-    except (TypeError, ValueError, AttributeError):
+            and camera.width_px * camera.height_px <= MAX_CAMERA_PIXELS and min(camera.width_px, camera.height_px) >= 8
+        ok = ok and all(low <= getattr(camera, name) <= high for name, (low, high) in CAMERA_BOUNDS.items()) \
+            and camera.far_m > camera.near_m
+        if ok and camera.lighting is not None:
+            light = camera.lighting
+            ok = len(light.direction) == 3 and all(isinstance(v, (int, float)) and math.isfinite(v) and abs(v) <= 10
+                                                   for v in (*light.direction, light.ambient, light.diffuse, light.specular))
+    except (TypeError, ValueError, AttributeError, RecursionError):
         ok = False
     if not ok:
-        raise ControllerError(f"{where}: camera spec is invalid (numbers, and at most {MAX_CAMERA_PIXELS} pixels)")
+        bounds = ", ".join(f"{k} {lo:g}..{hi:g}" for k, (lo, hi) in CAMERA_BOUNDS.items())
+        raise ControllerError(f"{where}: camera spec is invalid (at least 8 x 8 and at most {MAX_CAMERA_PIXELS} pixels; "
+                              f"{bounds}; far_m > near_m)")
     return camera
 
 
@@ -542,13 +568,20 @@ class RemoteController:
         if self.camera is not None and (not isinstance(every, int) or isinstance(every, bool) or every < 1):
             raise process._fail(f"camera_every_steps must be a positive int, got {every!r}", "")
         self.camera_every_steps = every
-        self.checkpoint_paths = [self._weights_file(p) for p in info.get("checkpoint_paths") or []]
+        declared = info.get("checkpoint_paths") or []
+        if not isinstance(declared, list) or not all(isinstance(p, str) for p in declared):
+            raise process._fail("checkpoint_paths must be a list of file names", "")
+        self.checkpoint_paths = [self._weights_file(p) for p in declared]
 
     def _weights_file(self, declared: str) -> Path:
         folder = self.process.path.parent
-        path = Path(declared) if Path(declared).is_absolute() else folder / declared
-        path = path.resolve()
-        if folder not in path.parents or not path.is_file():
+        try:
+            path = Path(declared) if Path(declared).is_absolute() else folder / declared
+            path = path.resolve()
+            ok = folder in path.parents and path.is_file()
+        except (ValueError, OSError, TypeError):  # a NUL byte, a name too long, not a string
+            ok = False
+        if not ok:
             raise self.process._fail(f"checkpoint path {declared!r} is not a file in the controller's folder", "")
         return path
 
@@ -574,11 +607,13 @@ class RemoteController:
             dtype, shape = str(header["dtype"]), [int(n) for n in header["shape"]]
             if dtype not in ("<f4", "<f8"):
                 return WrongDtype(dtype[:40], tuple(shape))
+            if header.get("truncated"):
+                return WrongShape(tuple(shape))
             count = int(np.prod(shape)) if shape else 1
             if count * int(dtype[-1]) != len(raw):
                 raise ValueError("array size does not match its shape")
             return np.frombuffer(raw, dtype=dtype).reshape(shape).astype(np.float64 if dtype == "<f8" else np.float32)
-        except (ValueError, KeyError, TypeError):
+        except (ValueError, KeyError, TypeError, AttributeError, RecursionError):
             raise self.process._fail("sent a malformed action message", context) from None
 
 
@@ -587,6 +622,13 @@ class NotAnArray:
     """act() returned something that is not an ndarray (its type name)."""
 
     type_name: str
+
+
+@dataclass(frozen=True)
+class WrongShape:
+    """act() returned a float array too large to send (its shape only)."""
+
+    shape_only: tuple
 
 
 @dataclass(frozen=True)

@@ -215,7 +215,8 @@ def test_the_run_folder_the_seed_key_and_the_working_directory_stay_hidden(tmp_p
         from pathlib import Path
         def check(self):
             out = Path(__file__).with_name("out")
-            assert list(out.iterdir()) == [], "the run folder is visible"
+            assert list((out / ".journal").iterdir()) == [], "the run secret is visible"
+            assert list((out / "episodes").iterdir()) == [], "the action logs are visible"
             try:
                 leaked = Path("{key}").read_bytes()
             except OSError:
