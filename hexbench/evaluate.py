@@ -96,6 +96,7 @@ def run_episode(job: EpisodeJob) -> dict:
             log = action_log.ActionLog(job.task.protocol, job.task.terrain, job.task.level, job.index, job.seed,
                                        actor.action_mode, episode.actions)
             name = job.episode_id + action_log.SUFFIX
+            make_folder(Path(job.log_dir))
             row["action_log_path"] = name
             row["action_log_sha256"] = action_log.write(Path(job.log_dir) / name, log)
         if recorder is not None:

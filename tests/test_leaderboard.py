@@ -245,7 +245,8 @@ def test_training_budget_comes_from_the_manifest_entry_with_the_checkpoint_sha25
     assert (by_label["middling"]["training_env_step_budget"], by_label["weak"]["training_env_step_budget"]) == (
         "", "")
     readme = (board / "README.md").read_text()
-    assert "| 1 | strong | 1M |" in readme and "| middling | none |" in readme and "| weak | ? |" in readme
+    assert "| 1 | strong | self-reported | 1M |" in readme and "| middling | self-reported | none |" in readme \
+        and "| weak | self-reported | ? |" in readme
     assert "181k–827k" in readme
 
 
@@ -613,7 +614,7 @@ def test_hostile_record_strings_are_quoted_and_defused_in_csv(hostile_dir):
     assert any(row["controller"] == "'-" + HOSTILE + " (paper)" for row in table)
     assert any(row["controller"] == "'+a|b <img src=x onerror=alert(1)> (paper)" for row in table)
     assert {row["controller"] for row in table} >= {"strong", "middling", "weak"}
-    text_columns = ("kind", "setting", "controller", "record", "terrain", "unit")
+    text_columns = ("kind", "setting", "controller", "record", "terrain", "unit", "trust")
     for row in table:
         for column, cell in row.items():
             if column in text_columns:
