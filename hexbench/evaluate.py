@@ -489,13 +489,21 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
 
 
 def _play_all(todo: list[EpisodeJob], total: int, workers: int, label: str, progress: bool, finished) -> None:
-    """Play every job (in this process, or over a pool of `workers` pinned processes), calling
+    """Play every job (in this process, over a pool of `workers` pinned processes, or as tasks of
+    the engine chosen with `hexbench.engines.using`, e.g. a Ray cluster), calling
     `finished(job, row)` as each ends; the first ControllerError stops the rest and propagates."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 
+    from hexbench import engines
+
+    engine = engines.current()
     with Progress(TextColumn(f"[bold]{label}[/]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TimeRemainingColumn(), disable=not progress, transient=False) as bar:
         task_bar = bar.add_task("episodes", total=total, completed=total - len(todo))
+        if engine is not None and engine.name != "local":
+            if todo:
+                engine.play_all(todo, finished, lambda: bar.advance(task_bar), workers)
+            return
         if workers <= 1:
             previous = pin_to_core()
             try:

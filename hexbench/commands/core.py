@@ -114,6 +114,10 @@ def _register_run(app: typer.Typer) -> None:
                                      "it (HMAC), so nobody can know the episodes in advance"),
         make_timeout: float = typer.Option(120.0, "--make-timeout", min=0.1,
                                            help="deadline for the controller process to start and build [s]"),
+        engine: str = typer.Option("local", "--engine", help="where episodes run: local (a process pool on this "
+                                   "machine) or ray (one Ray task per episode; pip install 'hexbench[ray]')"),
+        address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT "
+                                    "(default: RAY_ADDRESS, else the cluster started last here, else a local one)"),
     ) -> None:
         """Evaluate controller files on the protocol; print a success table; write result.json and episodes.parquet."""
         import os
@@ -121,6 +125,7 @@ def _register_run(app: typer.Typer) -> None:
 
         from rich.console import Console
 
+        from hexbench import engines
         from hexbench.errors import HexbenchError
         from hexbench.evaluate import evaluate
         from hexbench.sandbox import resolve_isolation
@@ -133,6 +138,7 @@ def _register_run(app: typer.Typer) -> None:
             tasks = load_suite(protocol).select(terrain or None, _parse_levels(levels))
             mode = resolve_isolation(isolation)
             seed_set = read_seed_key(seed_key) if seed_key else SeedSet()
+            run_engine = engines.make_engine(engine, address)
         except (ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2)
@@ -145,30 +151,43 @@ def _register_run(app: typer.Typer) -> None:
             except ImportError:
                 err.print("note: episode recording is not available in this install; running with --no-record")
                 record = False
-        n_workers = workers or os.cpu_count() or 1
         failed = 0
         for problem in _check_files(files):
             typer.echo(f"error: {problem}", err=True)
             failed += 1
-        for f in [f for f in files if Path(f).is_file()]:
-            name = label if (label and len(files) == 1) else Path(f).stem
-            out_dir = Path(out) / (name if len(files) > 1 else "") if out else Path("runs") / f"{name}-{protocol}"
+        runnable = [f for f in files if Path(f).is_file()]
+        if runnable and engine != "local":
             try:
-                result = evaluate(f, tasks, out_dir, episodes=episodes, workers=n_workers, record=record, label=name,
-                                  isolation=mode, seed_set=seed_set, make_timeout_s=make_timeout)
+                run_engine.connect()
             except HexbenchError as e:
-                result = None
                 typer.echo(f"error: {e}", err=True)
-            else:
-                if result.error:
-                    typer.echo(f"error: {result.error}", err=True)
-            if result is None or result.error:
-                failed += 1
-                continue
-            print_success_table(result.record, console)
-            console.print(f"wrote {out_dir / 'result.json'} and {out_dir / 'episodes.parquet'} "
-                          f"({result.record['provenance']['wall_time_s']:.1f} s, {n_workers} workers, "
-                          f"isolation {mode})", highlight=False)
+                raise typer.Exit(2)
+        n_workers = (workers or os.cpu_count() or 1) if engine == "local" or not runnable \
+            else workers or run_engine.default_workers()
+        where = "" if engine == "local" else f" on the {run_engine.describe()}" if runnable else ""
+        try:
+            for f in runnable:
+                name = label if (label and len(files) == 1) else Path(f).stem
+                out_dir = Path(out) / (name if len(files) > 1 else "") if out else Path("runs") / f"{name}-{protocol}"
+                try:
+                    with engines.using(run_engine):
+                        result = evaluate(f, tasks, out_dir, episodes=episodes, workers=n_workers, record=record,
+                                          label=name, isolation=mode, seed_set=seed_set, make_timeout_s=make_timeout)
+                except HexbenchError as e:
+                    result = None
+                    typer.echo(f"error: {e}", err=True)
+                else:
+                    if result.error:
+                        typer.echo(f"error: {result.error}", err=True)
+                if result is None or result.error:
+                    failed += 1
+                    continue
+                print_success_table(result.record, console)
+                console.print(f"wrote {out_dir / 'result.json'} and {out_dir / 'episodes.parquet'} "
+                              f"({result.record['provenance']['wall_time_s']:.1f} s, {n_workers} workers{where}, "
+                              f"isolation {mode})", highlight=False)
+        finally:
+            run_engine.close()
         if failed:
             raise typer.Exit(1)
 
