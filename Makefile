@@ -34,4 +34,5 @@ test: setup browser
 	$(PY) -m pytest -q
 
 test-all: setup
+	$(PY) -m pip install -q --disable-pip-version-check -e ".[ray]"
 	$(PY) -m pytest -q -m "slow or not slow"

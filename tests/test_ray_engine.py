@@ -227,6 +227,7 @@ def _same_record(local: Path, ray: Path) -> None:
 
 
 @needs_ray
+@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_ray_cluster_gives_the_local_record(cluster, local_run, tmp_path):
     out = _with_secret_of(local_run, tmp_path / "ray")
     proc = _ray_run(cluster, out)
@@ -255,6 +256,7 @@ def _controller_processes(cluster: Cluster) -> list:
 
 
 @needs_ray
+@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_controller_error_on_the_cluster_is_one_line_and_no_files(cluster, module_tiny_protocol, tmp_path):
     """A controller's error is a result, not a node failure: not retried, the run stops with its line."""
     out = tmp_path / "broken"
@@ -270,6 +272,7 @@ def test_a_controller_error_on_the_cluster_is_one_line_and_no_files(cluster, mod
 
 
 @needs_ray
+@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_killed_ray_run_resumes_to_the_local_record(cluster, local_run, tmp_path):
     out = _with_secret_of(local_run, tmp_path / "ray-resume")
     proc = _ray_run(cluster, out)
@@ -289,6 +292,7 @@ def test_a_killed_ray_run_resumes_to_the_local_record(cluster, local_run, tmp_pa
 
 
 @needs_ray
+@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_node_dying_mid_run_loses_no_episode(cluster, local_run, tmp_path):
     """Last in this module: the second node stays dead."""
     import psutil
