@@ -35,7 +35,7 @@ from hexbench.controller import ControllerError
 from hexbench.errors import HexbenchError, OutputError
 from hexbench.files import make_folder, os_reason, sha256_file, write_text_atomic
 from hexbench.records import episode_record_rows, episodes_digest
-from hexbench.rollout import ROW_FIELDS, LoggedActions, ReplayMismatch, play
+from hexbench.rollout import ROW_FIELDS, LoggedActions, play
 from hexbench.scoring import summarize_levels, summarize_terrains
 from hexbench.seeds import SeedSet, controller_seed, run_secret
 from hexbench.tasks import TaskSpec, format_level

@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hexbench.controller import CAMERA_GROUND_RGB, ControllerError, check_action
+from hexbench.controller import CAMERA_GROUND_RGB, check_action
 from hexbench.env import HexapodEnv
 from hexbench.errors import HexbenchError
 
@@ -164,5 +164,4 @@ def _camera_channel(actor, env: HexapodEnv):
     return see
 
 
-__all__ = ["Episode", "LocalActor", "LoggedActions", "ReplayMismatch", "ROW_FIELDS", "make_env", "play",
-           "ControllerError"]
+__all__ = ["Episode", "LocalActor", "LoggedActions", "ReplayMismatch", "ROW_FIELDS", "make_env", "play"]

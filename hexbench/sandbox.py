@@ -49,8 +49,8 @@ from pathlib import Path
 import numpy as np
 
 from hexbench import wire
-from hexbench.controller import (CAMERA_EVERY_STEPS, ControllerError, load_controller_module,
-                                 make_controller as make_in_process)
+from hexbench.controller import CAMERA_EVERY_STEPS, ControllerError
+from hexbench.controller import make_controller as make_in_process
 from hexbench.env import ACTION_MODES
 from hexbench.errors import HexbenchError
 from hexbench.files import sha256_file
