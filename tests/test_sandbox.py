@@ -46,8 +46,17 @@ def short_job(path: str, isolation: str = "auto", steps: int = 5, **kw) -> Episo
                       isolation=sandbox.resolve_isolation(isolation), **kw)
 
 
-def no_children_left():
-    return [p for p in psutil.Process().children(recursive=True) if p.is_running() and p.status() != "zombie"]
+def live_descendants() -> dict[int, psutil.Process]:
+    return {p.pid: p for p in psutil.Process().children(recursive=True)
+            if p.is_running() and p.status() != psutil.STATUS_ZOMBIE}
+
+
+@pytest.fixture
+def processes_started_here():
+    """Lists the processes started during the test that are still alive. Processes that were already
+    running (the resource tracker of an earlier test's process pool lives as long as pytest) do not count."""
+    before = set(live_descendants())
+    return lambda: [p for pid, p in live_descendants().items() if pid not in before]
 
 
 @pytest.fixture(autouse=True)
@@ -105,7 +114,8 @@ def test_reset_gets_a_derived_seed_never_the_episode_seed(tmp_path):
     ("import ctypes\ndef check(self):\n    ctypes.string_at(0)\n", "crashed (SIGSEGV) at step 0"),
     ("import os\ndef check(self):\n    os.fork()\n", "act() raised PermissionError at step 0"),
 ])
-def test_abnormal_ends_are_one_line_and_leave_no_process(tmp_path, body, expected, isolation):
+def test_abnormal_ends_are_one_line_and_leave_no_process(tmp_path, body, expected, isolation,
+                                                         processes_started_here):
     if isolation == "process" and not sandbox.seccomp_available() and "fork" in body:
         pytest.skip("no seccomp here")
     path = controller(tmp_path, body)
@@ -114,7 +124,7 @@ def test_abnormal_ends_are_one_line_and_leave_no_process(tmp_path, body, expecte
     message = str(err.value)
     assert expected in message and path in message and "\n" not in message
     sandbox.close_all()
-    assert no_children_left() == []
+    assert processes_started_here() == []
 
 
 def test_a_waiting_controller_is_stopped_by_the_wall_time_limit_and_a_busy_machine_fails_no_one(tmp_path):
@@ -134,12 +144,12 @@ def test_a_waiting_controller_is_stopped_by_the_wall_time_limit_and_a_busy_machi
     assert run_episode(short_job(napper, steps=2))["steps"] == 2
 
 
-def test_make_controller_has_a_deadline_enforced_from_outside(tmp_path):
+def test_make_controller_has_a_deadline_enforced_from_outside(tmp_path, processes_started_here):
     path = tmp_path / "hang.py"
     path.write_text("import time\ndef make_controller(task):\n    while True:\n        time.sleep(1)\n")
     with pytest.raises(sandbox.ControllerError, match="make_controller took longer than 3 s"):
         run_episode(short_job(str(path), make_timeout_s=3.0))
-    assert no_children_left() == []
+    assert processes_started_here() == []
 
 
 def test_memory_is_limited(tmp_path):
