@@ -18,7 +18,7 @@ $(VENV)/.installed: pyproject.toml
 run: setup
 	$(VENV)/bin/hexbench run baselines/ppo_cpg.py
 
-# bubblewrap isolates each submitted controller (hexbench/sandbox.py); libseccomp2 backs its seccomp
+# bubblewrap isolates each submitted controller (hexbench/evaluation/sandbox.py); libseccomp2 backs its seccomp
 # filter. Without them hexbench falls back to --isolation process and says so.
 sandbox:
 	@(test -x /usr/bin/bwrap && /sbin/ldconfig -p | grep -q libseccomp.so.2) \

@@ -1,10 +1,10 @@
 """HLTA (paper Fig. 2): look at the terrain ahead, classify it, dispatch that terrain's PPO-CPG policy.
 
     controller = make_controller(task)        # loads the classifier and the three PPO-CPG policies
-    controller.see(image)                     # a robot-camera image (hexbench.dataset.views.TERRAIN_CAMERA)
+    controller.see(image)                     # a robot-camera image (hexbench.perception.views.TERRAIN_CAMERA)
     action = controller.act(obs)              # the chosen terrain's PPO-CPG residual, rescaled to its eps
 
-High level: the terrain classifier (hexbench.classifier, LeNet + self-attention, shipped weights
+High level: the terrain classifier (hexbench.perception.classifier, LeNet + self-attention, shipped weights
 baselines/checkpoints/terrain_classifier.pt, sha256-checked) labels each image rough, slopes or
 stairs; the label in force is the majority of the last `Config.vote_window` labels, so one odd frame
 does not switch gaits. Low level: the PPO-CPG policy trained on that terrain (baselines/ppo_cpg.py
@@ -13,7 +13,7 @@ applies a_t = a_c + eps_env * a_r, so the residual a_r_k of policy k is sent as 
 (clipped to [-1, 1]); the mixed course's eps is 0.6, so no residual is clipped there.
 
 Camera: the evaluator sees `camera` and calls `see(image)` before `act` on step 0 and every
-`camera_every_steps` steps (hexbench.controller.SeeingController). Until an image has been seen,
+`camera_every_steps` steps (hexbench.suite.controller.SeeingController). Until an image has been seen,
 `act` refuses to guess.
 
     hexbench run baselines/hlta.py --terrain mixed             # the mixed course (paper Table 5's question)
@@ -47,8 +47,8 @@ class HLTAController:
     action_mode = "cpg_residual"
 
     def __init__(self, policies: dict, classify, env_eps: float, config: Config = CONFIG):
-        from hexbench.dataset.views import TERRAIN_CAMERA
-        from hexbench.env import DEFAULT_RESIDUAL_SCALE
+        from hexbench.perception.views import TERRAIN_CAMERA
+        from hexbench.world.env import DEFAULT_RESIDUAL_SCALE
 
         missing = sorted(set(config.terrains) - set(policies))
         if missing:
@@ -96,8 +96,8 @@ def make_classify(checkpoint: Path):
     """image -> terrain name, with the sha256-checked shipped classifier."""
     import torch
 
-    from hexbench.classifier import load_classifier, predict
-    from hexbench.dataset.views import TERRAIN_CLASSES
+    from hexbench.perception.classifier import load_classifier, predict
+    from hexbench.perception.views import TERRAIN_CLASSES
 
     torch.set_num_threads(1)
     model = load_classifier(checkpoint)
@@ -106,9 +106,9 @@ def make_classify(checkpoint: Path):
 
 def make_controller(task, config: Config = CONFIG) -> HLTAController:
     """The HLTA controller with the shipped classifier and the shipped PPO-CPG policy of every terrain."""
-    from hexbench.controller import load_controller_module
-    from hexbench.env import DEFAULT_RESIDUAL_SCALE
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
+    from hexbench.suite.controller import load_controller_module
+    from hexbench.world.env import DEFAULT_RESIDUAL_SCALE
 
     low = load_controller_module(HERE / config.low_level_baseline)
     policies = {t: make_policy_controller(low.CONFIG, low.CHECKPOINTS_DIR, "ppo_cpg", task, weights_terrain=t)

@@ -1,11 +1,11 @@
 """HRL: PPO chooses the CPG's gait parameters (omega_swing, A1, A2, A3) every control step (paper 4.3).
 
-    hexbench train baselines/hrl.py --terrain rough      # train (see hexbench/train.py)
+    hexbench train baselines/hrl.py --terrain rough      # train (see hexbench/training/train.py)
     hexbench run baselines/hrl.py                        # evaluate the shipped weights
 
 Same hyper-parameters as PPO-CPG (paper Table 2); the policy starts at the CPG's own gait (see
 initial_action below). The action a in [-1, 1]^4 maps onto
-omega_swing in [pi/2, pi] rad/s, A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (hexbench.env).
+omega_swing in [pi/2, pi] rad/s, A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (hexbench.world.env).
 """
 
 import math
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import torch
 
-from hexbench.env import cpg_params_action
+from hexbench.world.env import cpg_params_action
 
 
 @dataclass(frozen=True)
@@ -33,8 +33,8 @@ class Config:
     n_epochs: int = 10  # SB3 default
     ent_coef: float = 0.0
     log_std_init: float = -1.0  # not in the paper: std 0.37 (SB3's 1.0 saturates most actions)
-    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
-    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.train)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.world.rewards)
+    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.training.train)
     # Not in the paper: the policy's mean action starts at the CPG's own gait (omega_swing pi rad/s,
     # A1 0.45; A2 1.2 and A3 1.0 clipped to the ranges' tops, 1.0 and 0.5), which walks every
     # terrain's lowest level. The ranges' midpoint (action 0) has A1 = 0: no hip swing, no walking;
@@ -48,7 +48,7 @@ CHECKPOINTS_DIR = Path(__file__).resolve().parent / "checkpoints"
 
 def make_controller(task):
     """The shipped hrl policy for task.terrain, acting deterministically."""
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
 
     torch.set_num_threads(1)
     return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "hrl", task)

@@ -1,6 +1,6 @@
 """Pure PPO: the policy outputs all 18 joint targets directly (no CPG); paper's 'PPO' baseline.
 
-    hexbench train baselines/ppo.py --terrain rough      # train (see hexbench/train.py)
+    hexbench train baselines/ppo.py --terrain rough      # train (see hexbench/training/train.py)
     hexbench run baselines/ppo.py                        # evaluate the shipped weights
 
 Same hyper-parameters as PPO-CPG (paper Table 2); only the action mode differs: a in [-1, 1]^18
@@ -29,8 +29,8 @@ class Config:
     n_epochs: int = 10  # SB3 default
     ent_coef: float = 0.0
     log_std_init: float = -1.0  # not in the paper: std 0.37 (SB3's 1.0 saturates most actions)
-    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
-    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.train)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.world.rewards)
+    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.training.train)
 
 
 CONFIG = Config()
@@ -39,7 +39,7 @@ CHECKPOINTS_DIR = Path(__file__).resolve().parent / "checkpoints"
 
 def make_controller(task):
     """The shipped ppo policy for task.terrain, acting deterministically."""
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
 
     torch.set_num_threads(1)
     return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "ppo", task)

@@ -1,6 +1,6 @@
 """PPO-CPG (the paper's method): PPO learns a residual a_r on top of the Hopf CPG, a_t = a_c + eps a_r.
 
-    hexbench train baselines/ppo_cpg.py --terrain rough      # train (see hexbench/train.py)
+    hexbench train baselines/ppo_cpg.py --terrain rough      # train (see hexbench/training/train.py)
     hexbench run baselines/ppo_cpg.py                        # evaluate the shipped weights
 
 Hyper-parameters: paper Table 2. eps is the terrain default of paper 3.2 (0.6 rough, 0.4 slopes,
@@ -38,8 +38,8 @@ class Config:
     use_sde: bool = False  # SB3 default: Gaussian noise drawn anew every step (True: gSDE, docs/training.md)
     sde_sample_freq: int = -1  # SB3 default; with use_sde, steps between new exploration matrices
     log_std_init: float = -2.3  # not in the paper: std 0.10; at 0.37 (-1.0) the deterministic policy decayed (docs/training.md)
-    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
-    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.train)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.world.rewards)
+    normalize_reward: bool = True  # not in the paper: PPO's joint grad-norm clip needs O(1) returns (hexbench.training.train)
 
 
 CONFIG = Config()
@@ -48,7 +48,7 @@ CHECKPOINTS_DIR = Path(__file__).resolve().parent / "checkpoints"
 
 def make_controller(task):
     """The shipped PPO-CPG policy for task.terrain, acting deterministically."""
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
 
     torch.set_num_threads(1)
     return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "ppo_cpg", task)

@@ -1,6 +1,6 @@
 """Pure SAC: the policy outputs all 18 joint targets directly (no CPG); paper's 'SAC' baseline.
 
-    hexbench train baselines/sac.py --terrain rough      # train (see hexbench/train.py)
+    hexbench train baselines/sac.py --terrain rough      # train (see hexbench/training/train.py)
     hexbench run baselines/sac.py                        # evaluate the shipped weights
 
 Shares PPO-CPG's network, learning rate, batch size and gamma (paper Table 2); the rest is SB3's
@@ -31,7 +31,7 @@ class Config:
     ent_coef: str = "auto"  # SB3 default: entropy temperature learned
     log_std_init: float = -1.0  # not in the paper; same initial exploration as the PPO baselines
     action_noise_std: float = 0.0  # SAC explores through its stochastic policy
-    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.world.rewards)
 
 
 CONFIG = Config()
@@ -40,7 +40,7 @@ CHECKPOINTS_DIR = Path(__file__).resolve().parent / "checkpoints"
 
 def make_controller(task):
     """The shipped sac policy for task.terrain, acting deterministically."""
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
 
     torch.set_num_threads(1)
     return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "sac", task)

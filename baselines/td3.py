@@ -1,6 +1,6 @@
 """Pure TD3: the policy outputs all 18 joint targets directly (no CPG); paper's 'TD3' baseline.
 
-    hexbench train baselines/td3.py --terrain rough      # train (see hexbench/train.py)
+    hexbench train baselines/td3.py --terrain rough      # train (see hexbench/training/train.py)
     hexbench run baselines/td3.py                        # evaluate the shipped weights
 
 Shares PPO-CPG's network, learning rate, batch size and gamma (paper Table 2); the rest is SB3's
@@ -32,7 +32,7 @@ class Config:
     target_policy_noise: float = 0.2  # SB3 default
     target_noise_clip: float = 0.5  # SB3 default
     action_noise_std: float = 0.1  # Gaussian exploration noise on the [-1, 1] action (SB3 adds none by default)
-    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.world.rewards)
 
 
 CONFIG = Config()
@@ -41,7 +41,7 @@ CHECKPOINTS_DIR = Path(__file__).resolve().parent / "checkpoints"
 
 def make_controller(task):
     """The shipped td3 policy for task.terrain, acting deterministically."""
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
 
     torch.set_num_threads(1)
     return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "td3", task)

@@ -1,6 +1,6 @@
 """TD3-CPG: TD3 learns the residual a_r on top of the Hopf CPG, a_t = a_c + eps a_r (paper's 'TD3-CPG').
 
-    hexbench train baselines/td3_cpg.py --terrain rough      # train (see hexbench/train.py)
+    hexbench train baselines/td3_cpg.py --terrain rough      # train (see hexbench/training/train.py)
     hexbench run baselines/td3_cpg.py                        # evaluate the shipped weights
 
 Shares PPO-CPG's network, learning rate, batch size and gamma (paper Table 2) and eps (paper 3.2);
@@ -32,7 +32,7 @@ class Config:
     target_policy_noise: float = 0.2  # SB3 default
     target_noise_clip: float = 0.5  # SB3 default
     action_noise_std: float = 0.1  # Gaussian exploration noise on the [-1, 1] action (SB3 adds none by default)
-    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.rewards)
+    early_end_penalty: bool = True  # not in the paper: ending early must not pay (hexbench.world.rewards)
 
 
 CONFIG = Config()
@@ -41,7 +41,7 @@ CHECKPOINTS_DIR = Path(__file__).resolve().parent / "checkpoints"
 
 def make_controller(task):
     """The shipped td3_cpg policy for task.terrain, acting deterministically."""
-    from hexbench.policy import make_policy_controller
+    from hexbench.agents.policy import make_policy_controller
 
     torch.set_num_threads(1)
     return make_policy_controller(CONFIG, CHECKPOINTS_DIR, "td3_cpg", task)

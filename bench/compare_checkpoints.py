@@ -1,7 +1,7 @@
 """Held-out head-to-head of checkpoints from different training runs (issue 5).
 
 `hexbench checkpoints select` ranks the checkpoints of one run. To choose between the best of two
-runs, this plays each named checkpoint on the same held-out seeds (hexbench.selection's `heldout`
+runs, this plays each named checkpoint on the same held-out seeds (hexbench.training.selection's `heldout`
 namespace, never a protocol seed) at the levels given, under the protocol's rules, and prints
 successes per level, and forward progress (mean and max over all its episodes), which tells
 checkpoints apart where none arrives. Nothing is written to the runs' selection.json. A level
@@ -22,9 +22,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.selection import heldout_seeds, score_job
-from hexbench.tasks import load_suite
-from hexbench.train import TrainError, checkpoint_at, read_run
+from hexbench.suite.tasks import load_suite
+from hexbench.training.selection import heldout_seeds, score_job
+from hexbench.training.train import TrainError, checkpoint_at, read_run
 
 
 def parse_candidate(text: str) -> tuple[dict, Path, dict]:

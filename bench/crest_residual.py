@@ -24,12 +24,12 @@ import argparse
 import time
 
 import numpy as np
-
-from hexbench.robot import JOINT_NAMES, LEG_NAMES
-from hexbench.tasks import load_suite
 from residual_episode import Residual, play_residual
 
-BASE_X = 54  # observation index of base x [m] (hexbench.env module docstring)
+from hexbench.suite.tasks import load_suite
+from hexbench.world.robot import JOINT_NAMES, LEG_NAMES
+
+BASE_X = 54  # observation index of base x [m] (hexbench.world.env module docstring)
 
 
 def joints(kind: str) -> list[int]:

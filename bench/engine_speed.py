@@ -4,7 +4,7 @@
     python bench/engine_speed.py --workers 1 2 4 8 16      # scaling, where the cores exist
     python bench/engine_speed.py --episodes 4 --levels-per-terrain 3 --record
 
-For each worker count W: `hexbench.evaluate.evaluate` over the process pool (`workers=W`), then
+For each worker count W: `hexbench.evaluation.evaluate.evaluate` over the process pool (`workers=W`), then
 over a fresh local Ray instance of W CPUs (`ray.init(num_cpus=W)`, one task per episode, started
 before the clock starts; its start-up is reported apart). Both runs share one run secret, so their
 rows must be identical (checked). With --repeats N each engine runs N times, alternating which
@@ -24,9 +24,9 @@ import tempfile
 import time
 from pathlib import Path
 
-from hexbench import engines
-from hexbench.evaluate import evaluate
-from hexbench.tasks import load_suite
+from hexbench.evaluation import engines
+from hexbench.evaluation.evaluate import evaluate
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 

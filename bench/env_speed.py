@@ -42,7 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 import pybullet as p
 
-from hexbench.env import EnvConfig, HexapodEnv
+from hexbench.world.env import EnvConfig, HexapodEnv
 
 # The lowest evaluation level of each terrain (paper Table 4), where the open-loop CPG
 # walks the whole way, so the robot stays in normal walking contact for the whole run.

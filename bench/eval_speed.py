@@ -3,7 +3,7 @@
     python bench/eval_speed.py                      # full protocol v1, 1 then 2 workers
     python bench/eval_speed.py --episodes 4         # 4 episodes per level (quick estimate)
 
-Runs `hexbench.evaluate.evaluate` without recording into fresh temporary directories and
+Runs `hexbench.evaluation.evaluate.evaluate` without recording into fresh temporary directories and
 prints wall time, episodes/s, control steps/s and the 1 -> 2 worker speed-up. Writes a JSON
 summary to bench/out/eval_speed.json.
 """
@@ -17,8 +17,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from hexbench.evaluate import evaluate
-from hexbench.tasks import load_suite
+from hexbench.evaluation.evaluate import evaluate
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 

@@ -23,9 +23,9 @@ import argparse
 from pathlib import Path
 
 import numpy as np
-
-from hexbench.env import EnvConfig
 from residual_episode import EpisodeEnd, play_residual
+
+from hexbench.world.env import EnvConfig
 
 
 def white_noise(std: float, rng: np.random.Generator):
@@ -40,8 +40,8 @@ def gsde_noise(std: float, period: int, rng: np.random.Generator):
 
     import torch
 
-    from hexbench.policy import build_policy, scale_observation
-    from hexbench.train import load_baseline_config
+    from hexbench.agents.policy import build_policy, scale_observation
+    from hexbench.training.train import load_baseline_config
 
     torch.manual_seed(int(rng.integers(2**31)))
     config = load_baseline_config(Path(__file__).resolve().parent.parent / "baselines" / "ppo_cpg.py")

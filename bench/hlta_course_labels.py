@@ -26,8 +26,7 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def truth_at(x_m: float) -> str:
-    from hexbench.terrain import (MIXED_ROUGH_END_X_M, MIXED_SLOPE_START_X_M, MIXED_STAIRS_START_X_M,
-                                  SlopesTerrain)
+    from hexbench.world.terrain import MIXED_ROUGH_END_X_M, MIXED_SLOPE_START_X_M, MIXED_STAIRS_START_X_M, SlopesTerrain
 
     slope_end = SlopesTerrain(10.0, start_x_m=MIXED_SLOPE_START_X_M).breakpoints_m[3]
     if x_m < (MIXED_ROUGH_END_X_M + MIXED_SLOPE_START_X_M) / 2:
@@ -48,12 +47,12 @@ def main() -> None:
 
     import torch
 
-    from hexbench.camera import robot_camera_image
-    from hexbench.classifier import load_classifier, predict
-    from hexbench.controller import CAMERA_GROUND_RGB
-    from hexbench.dataset.views import TERRAIN_CAMERA, TERRAIN_CLASSES, paint_terrain
-    from hexbench.env import HexapodEnv
-    from hexbench.tasks import load_suite
+    from hexbench.perception.classifier import load_classifier, predict
+    from hexbench.perception.views import TERRAIN_CAMERA, TERRAIN_CLASSES, paint_terrain
+    from hexbench.suite.controller import CAMERA_GROUND_RGB
+    from hexbench.suite.tasks import load_suite
+    from hexbench.world.camera import robot_camera_image
+    from hexbench.world.env import HexapodEnv
 
     torch.set_num_threads(1)
     model = load_classifier(REPO / "baselines" / "checkpoints" / "terrain_classifier.pt")

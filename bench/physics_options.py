@@ -24,9 +24,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from hexbench.env import EnvConfig, HexapodEnv
-from hexbench.sim import PhysicsConfig
-from hexbench.tasks import episode_seed
+from hexbench.suite.tasks import episode_seed
+from hexbench.world.env import EnvConfig, HexapodEnv
+from hexbench.world.sim import PhysicsConfig
 
 CPG_FULL_PROTOCOL_SIM_S = 27994.0  # sum of sim_time_s over leaderboard/cpg.json (protocol v1, 860 episodes)
 TEN_MINUTES_CPU_S = 2 * 600.0

@@ -1,6 +1,6 @@
 """What episode recording costs: evaluation time with and without recording, and bytes per episode (issue 4).
 
-The open-loop CPG baseline (baselines/cpg.py) is evaluated with `hexbench.evaluate.evaluate`
+The open-loop CPG baseline (baselines/cpg.py) is evaluated with `hexbench.evaluation.evaluate.evaluate`
 on a task selection twice per repeat, once with `record=False` and once with `record=True`
 (alternating, in this process: workers = 1), and
 
@@ -70,7 +70,7 @@ class _TimedRecorder:
 
 
 def _run(tasks, episodes: int | None, record: bool, clock: dict) -> dict:
-    from hexbench.evaluate import evaluate
+    from hexbench.evaluation.evaluate import evaluate
 
     with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
         out = Path(tmp) / "run"
@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
 
     import hexbench.recording as recording
-    from hexbench.tasks import load_suite
+    from hexbench.suite.tasks import load_suite
 
     suite = load_suite("v1")
     if args.full:
@@ -222,8 +222,8 @@ def _warm_up() -> None:
     """Record one short episode so imports and per-process caches are in place before timing."""
     import numpy as np
 
-    from hexbench.env import HexapodEnv
     from hexbench.recording import make_episode_recorder
+    from hexbench.world.env import HexapodEnv
 
     env = HexapodEnv(terrain="rough", level=6.0, max_steps=20)
     with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
@@ -240,8 +240,8 @@ def _warm_up() -> None:
 
 
 def _one_process(tasks, record: bool) -> None:
-    from hexbench.evaluate import EpisodeJob, run_episode
-    from hexbench.tasks import episode_seed
+    from hexbench.evaluation.episode import EpisodeJob, run_episode
+    from hexbench.suite.tasks import episode_seed
 
     with tempfile.TemporaryDirectory(prefix="hexbench_bench_") as tmp:
         for task in tasks:
@@ -251,8 +251,8 @@ def _one_process(tasks, record: bool) -> None:
 
 def _paired_episode(task, pairs: int) -> dict:
     """One episode through the evaluator's own episode function, with and without recording, `pairs` times."""
-    from hexbench.evaluate import EpisodeJob, run_episode
-    from hexbench.tasks import episode_seed
+    from hexbench.evaluation.episode import EpisodeJob, run_episode
+    from hexbench.suite.tasks import episode_seed
 
     seed = episode_seed(task.protocol, task.terrain, task.level, 0)
     ratios, plain, recorded, steps = [], [], [], 0
@@ -278,8 +278,8 @@ def _long_episode(steps: int, noise: float) -> dict:
     """Record one `steps`-step episode (goal out of reach, no lateral or fall end) and return its bytes."""
     import numpy as np
 
-    from hexbench.env import HexapodEnv
     from hexbench.recording import make_episode_recorder
+    from hexbench.world.env import HexapodEnv
 
     env = HexapodEnv(terrain="rough", level=6.0, max_steps=steps, goal_distance_m=1000.0,
                      max_lateral_deviation_m=1000.0, fall_tilt_deg=180.0)

@@ -14,9 +14,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hexbench.env import EnvConfig, HexapodEnv
-from hexbench.robot import JOINT_NAMES
-from hexbench.rollout import play
+from hexbench.suite.rollout import play
+from hexbench.world.env import EnvConfig, HexapodEnv
+from hexbench.world.robot import JOINT_NAMES
 
 # (noisy observation, control step from 0) -> a_r, clipped to [-1, 1] before it is sent
 Residual = Callable[[np.ndarray, int], np.ndarray]
@@ -72,7 +72,7 @@ class _StepHook:
 def play_residual(config: EnvConfig, residual: Residual, seed: int, *, max_steps: int | None = None,
                   on_step: StepHook | None = None) -> EpisodeEnd:
     """Play one episode (env seed `seed`) with a_t = a_c + eps * residual(obs, step), through the one
-    episode loop (hexbench.rollout.play); stopping at `max_steps` first ends as "running"."""
+    episode loop (hexbench.suite.rollout.play); stopping at `max_steps` first ends as "running"."""
     limit = config.max_steps if max_steps is None else min(max_steps, config.max_steps)
     stopped_early = limit < config.max_steps
     env = HexapodEnv(replace(config, max_steps=limit))

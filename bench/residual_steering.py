@@ -21,10 +21,10 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
-from hexbench.env import NO_NOISE, EnvConfig
-from hexbench.robot import JOINT_NAMES, LEG_NAMES
 from residual_episode import Residual, play_residual
+
+from hexbench.world.env import NO_NOISE, EnvConfig
+from hexbench.world.robot import JOINT_NAMES, LEG_NAMES
 
 RIGHT_HIPS = [JOINT_NAMES.index(f"{leg}_hip") for leg in LEG_NAMES if leg.startswith("R")]
 LEFT_HIPS = [JOINT_NAMES.index(f"{leg}_hip") for leg in LEG_NAMES if leg.startswith("L")]

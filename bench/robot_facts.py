@@ -24,10 +24,10 @@ import numpy as np
 import psutil
 import pybullet as p
 
-from hexbench.env import EnvConfig, HexapodEnv
-from hexbench.robot import NUM_JOINTS, JetHexaSpec
-from hexbench.sim import PhysicsConfig, Simulation, _urdf_file
-from hexbench.terrain import FlatTerrain
+from hexbench.world.env import EnvConfig, HexapodEnv
+from hexbench.world.robot import NUM_JOINTS, JetHexaSpec
+from hexbench.world.sim import PhysicsConfig, Simulation, _urdf_file
+from hexbench.world.terrain import FlatTerrain
 
 SPEC = JetHexaSpec()
 

@@ -28,9 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench import sandbox
-from hexbench.evaluate import evaluate, pin_to_core
-from hexbench.tasks import load_suite
+from hexbench.evaluation import sandbox
+from hexbench.evaluation.evaluate import evaluate
+from hexbench.evaluation.workers import pin_to_core
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 LEVELS = (("rough", 3.0), ("rough", 11.0), ("slopes", 6.0), ("slopes", 20.0), ("stairs", 2.0), ("stairs", 8.0))

@@ -2,7 +2,7 @@
 
 Plays the CPG (cpg_residual mode, a_r = 0) on one terrain level under the env's rules and prints,
 every `--every` control steps and at the end: base x [m] and z [m], pitch [deg], and which legs'
-tibias touch anything (`Sim.foot_contacts`), named as in `hexbench.robot.LEG_NAMES`.
+tibias touch anything (`Sim.foot_contacts`), named as in `hexbench.world.robot.LEG_NAMES`.
 
     python bench/stall_trace.py --terrain slopes --level 20 --seed 3
 """
@@ -12,9 +12,10 @@ from __future__ import annotations
 import argparse
 import math
 
-from hexbench.env import EnvConfig
-from hexbench.robot import LEG_NAMES
 from residual_episode import play_residual, zero_residual
+
+from hexbench.world.env import EnvConfig
+from hexbench.world.robot import LEG_NAMES
 
 
 def main() -> None:

@@ -27,11 +27,11 @@ def main() -> None:
 
     import torch
 
-    from hexbench.camera import robot_camera_image
-    from hexbench.classifier import DEFAULT_CHECKPOINT, LeNetAttention, load_classifier, to_tensor
-    from hexbench.dataset.build import BuildConfig, plan_images
-    from hexbench.dataset.views import TERRAIN_CAMERA, render_view
-    from hexbench.sim import Simulation
+    from hexbench.perception.classifier import DEFAULT_CHECKPOINT, LeNetAttention, load_classifier, to_tensor
+    from hexbench.perception.dataset.build import BuildConfig, plan_images
+    from hexbench.perception.views import TERRAIN_CAMERA, render_view
+    from hexbench.world.camera import robot_camera_image
+    from hexbench.world.sim import Simulation
 
     torch.set_num_threads(args.threads)
     views = [p.view for p in plan_images(BuildConfig(per_class=max(2, args.images // 3), seed=123))][: args.images]

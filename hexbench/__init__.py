@@ -1,7 +1,8 @@
 """hexbench: benchmark suite and dataset for hexapod locomotion on challenging terrain."""
 
-__version__ = "0.1.0"
+from hexbench.artifacts.provenance import HEXBENCH_VERSION
+from hexbench.suite.tasks import register_envs as _register_envs
 
-from hexbench.tasks import register_envs as _register_envs  # noqa: E402
+__version__ = HEXBENCH_VERSION
 
 _register_envs()

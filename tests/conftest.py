@@ -42,7 +42,7 @@ headroom_levels = []
 def tiny_protocol(tmp_path_factory, monkeypatch):
     """HEXBENCH_TASKS_DIR pointed at a tiny protocol v1 (one level per terrain, 2 episodes of 40 steps),
     so a whole "full run" takes seconds; the suite cache is cleared on the way in and out."""
-    from hexbench.tasks import load_suite
+    from hexbench.suite.tasks import load_suite
 
     folder = tmp_path_factory.mktemp("tiny_tasks")
     (folder / "protocol_v1.toml").write_text(TINY_PROTOCOL)

@@ -11,8 +11,8 @@ import math
 
 import numpy as np
 
-from hexbench.scoring import summarize_levels, summarize_terrains
-from hexbench.tasks import load_suite
+from hexbench.suite.scoring import summarize_levels, summarize_terrains
+from hexbench.suite.tasks import load_suite
 
 END_REASONS_FAILED = ("fall", "lateral_deviation", "stalled", "step_limit")
 

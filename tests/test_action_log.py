@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hexbench import action_log
-from hexbench.action_log import ActionLog, ActionLogError
+from hexbench.artifacts import action_log
+from hexbench.artifacts.action_log import ActionLog, ActionLogError
 
 
 def _log(steps=50, dim=18, seed=0):

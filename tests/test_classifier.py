@@ -3,18 +3,29 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
 from typer.testing import CliRunner
 
-from hexbench.classifier import (DEFAULT_CHECKPOINT, ChecksumError, LeNetAttention, TrainConfig, evaluate,
-                                 load_classifier, load_split, plot_confusion, predict, save_checkpoint, sidecar_path,
-                                 to_tensor, train)
 from hexbench.cli import app
-from hexbench.dataset.build import BuildConfig, build_terrain_images
+from hexbench.perception.classifier import (
+    DEFAULT_CHECKPOINT,
+    ChecksumError,
+    LeNetAttention,
+    TrainConfig,
+    evaluate,
+    load_classifier,
+    load_split,
+    plot_confusion,
+    predict,
+    save_checkpoint,
+    sidecar_path,
+    to_tensor,
+    train,
+)
+from hexbench.perception.dataset.build import BuildConfig, build_terrain_images
 
 
 def test_model_shapes_and_attention_block():

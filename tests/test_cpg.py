@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hexbench.cpg import NUM_LEGS, TRIPOD_PHASES_RAD, CPGParams, HopfCPG
+from hexbench.world.cpg import NUM_LEGS, TRIPOD_PHASES_RAD, CPGParams, HopfCPG
 
 CONTROL_DT_S = 1.0 / 60.0
 TRIPOD_A = (0, 2, 4)  # RF, RB, LM

@@ -1,12 +1,12 @@
-"""hexbench.curves: learning curves from progress CSVs, and plotting runs at one env-step budget."""
+"""hexbench.training.curves: learning curves from progress CSVs, and plotting runs at one env-step budget."""
 
 import json
 
 import pandas as pd
 import pytest
 
-from hexbench.curves import CurvesError, line_styles, load_progress, plot_curves
-from hexbench.train import CSV_COLUMNS
+from hexbench.training.curves import CurvesError, line_styles, load_progress, plot_curves
+from hexbench.training.train import CSV_COLUMNS
 
 
 def write_run(folder, method, total_steps, logged_steps):

@@ -17,10 +17,16 @@ import pytest
 from typer.testing import CliRunner
 
 from hexbench.cli import app
-from hexbench.dataset.archive import ArchiveError, pack_build, safe_extract
-from hexbench.dataset.build import BuildConfig, build_terrain_images, plan_images, verify_build
-from hexbench.dataset.registry import DownloadError, RegistryEntry, download, registry_entry_for, write_registry
-from hexbench.dataset.views import TERRAIN_CLASSES
+from hexbench.perception.dataset.archive import ArchiveError, pack_build, safe_extract
+from hexbench.perception.dataset.build import BuildConfig, build_terrain_images, plan_images, verify_build
+from hexbench.perception.dataset.registry import (
+    DownloadError,
+    RegistryEntry,
+    download,
+    registry_entry_for,
+    write_registry,
+)
+from hexbench.perception.views import TERRAIN_CLASSES
 
 TINY = BuildConfig(per_class=5, seed=3)
 
@@ -96,7 +102,7 @@ def test_build_refuses_existing_folder_and_leaves_no_partial_files(tiny_build, t
 
 
 def test_failed_build_removes_its_temp_folder(tmp_path, monkeypatch):
-    import hexbench.dataset.build as build_mod
+    import hexbench.perception.dataset.build as build_mod
 
     calls = {"n": 0}
 
@@ -270,6 +276,7 @@ def test_publish_cli_prints_the_entry_of_a_deterministic_archive(tiny_build, tmp
     assert first.exit_code == 0, first.output
     archive = tmp_path / "a" / "terrain-images-1.0.0.tar.gz"
     import hashlib
+
     import tomllib
 
     entry = tomllib.loads(first.output.split("\n", 1)[1])["terrain-images"]
@@ -280,7 +287,7 @@ def test_publish_cli_prints_the_entry_of_a_deterministic_archive(tiny_build, tmp
 
 
 def test_shipped_registry_is_well_formed():
-    from hexbench.dataset.registry import load_registry
+    from hexbench.perception.dataset.registry import load_registry
 
     entry = load_registry()["terrain-images"]
     assert len(entry.sha256) == 64 and entry.size_bytes > 0 and entry.urls

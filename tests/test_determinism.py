@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from hexbench.env import ACTION_MODES, EnvConfig, HexapodEnv
-from hexbench.tasks import load_suite
+from hexbench.suite.tasks import load_suite
+from hexbench.world.env import ACTION_MODES, EnvConfig, HexapodEnv
 
 STEPS = 500
 CASES = [(terrain, level, mode) for terrain, level in (("flat", 0.0), ("rough", 8.0), ("slopes", 12.0), ("stairs", 5.5))

@@ -9,7 +9,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from hexbench.env import (
+from hexbench.world.env import (
     CPG_PARAM_HIGH,
     CPG_PARAM_LOW,
     NO_NOISE,
@@ -19,7 +19,7 @@ from hexbench.env import (
     HexapodEnv,
     ObservationNoise,
 )
-from hexbench.rewards import TABLE1_WEIGHTS, difficulty_factor, total_reward
+from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, total_reward
 
 ZERO18 = np.zeros(18, dtype=np.float32)
 
@@ -332,7 +332,7 @@ def test_curriculum_levels_up_after_20_arrivals_and_stops_at_the_top(make_env) -
 
 
 def test_curricula_follow_section_4_1() -> None:
-    from hexbench.env import CURRICULA
+    from hexbench.world.env import CURRICULA
 
     assert (CURRICULA["rough"].start_level, CURRICULA["rough"].level_step, CURRICULA["rough"].max_level) == (5, 1, 13)
     assert (CURRICULA["slopes"].start_level, CURRICULA["slopes"].level_step) == (5, 3)

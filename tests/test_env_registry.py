@@ -10,8 +10,8 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import hexbench  # noqa: F401  (registers the ids)
-from hexbench.env import ACTION_MODES
-from hexbench.tasks import MODE_IDS, load_suite, registered_ids
+from hexbench.suite.tasks import MODE_IDS, load_suite, registered_ids
+from hexbench.world.env import ACTION_MODES
 
 IDS = registered_ids()
 SUITE = load_suite("v1")

@@ -13,8 +13,9 @@ import pytest
 from typer.testing import CliRunner
 
 from hexbench.cli import app
-from hexbench.evaluate import EpisodeJob, evaluate, run_episode, run_time
-from hexbench.tasks import load_suite
+from hexbench.evaluation.episode import EpisodeJob, run_episode
+from hexbench.evaluation.evaluate import evaluate, run_time
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 BROKEN = REPO / "tests" / "controllers"
@@ -187,7 +188,7 @@ def test_two_workers_give_the_same_record_as_one(tmp_path):
 
 
 def test_list_shows_levels_and_every_id():
-    from hexbench.tasks import registered_ids
+    from hexbench.suite.tasks import registered_ids
 
     r = invoke(["list", "--ids"])
     assert r.exit_code == 0
@@ -200,7 +201,7 @@ def test_a_controller_with_a_camera_sees_the_painted_terrain_on_schedule(tmp_pat
     ctrl_file = tmp_path / "looker.py"
     ctrl_file.write_text(
         "import numpy as np\n"
-        "from hexbench.camera import CameraSpec\n"
+        "from hexbench.world.camera import CameraSpec\n"
         "LOG = []\n"
         "class Looker:\n"
         "    action_mode = 'cpg_residual'\n"
@@ -216,7 +217,7 @@ def test_a_controller_with_a_camera_sees_the_painted_terrain_on_schedule(tmp_pat
         "        return np.zeros(18, dtype=np.float32)\n"
         "def make_controller(task):\n"
         "    return Looker()\n")
-    from hexbench import sandbox
+    from hexbench.evaluation import sandbox
 
     task = load_suite("v1").task("mixed", 1)
     sandboxed = run_episode(EpisodeJob(str(ctrl_file), task, 0, task.seeds(1)[0], max_steps=10))

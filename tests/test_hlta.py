@@ -11,7 +11,7 @@ HLTA_PATH = Path(__file__).resolve().parents[1] / "baselines" / "hlta.py"
 
 
 def _hlta():
-    from hexbench.controller import load_controller_module
+    from hexbench.suite.controller import load_controller_module
 
     return load_controller_module(HLTA_PATH)
 
@@ -69,8 +69,8 @@ def test_needs_a_policy_per_terrain():
 @pytest.mark.skipif(not (HLTA_PATH.parent / "checkpoints" / "terrain_classifier.pt").is_file(),
                     reason="no shipped classifier weights")
 def test_shipped_classifier_sees_stairs_from_the_robot_camera():
-    from hexbench.dataset.views import TerrainInstance, View, render_view
-    from hexbench.sim import Simulation
+    from hexbench.perception.views import TerrainInstance, View, render_view
+    from hexbench.world.sim import Simulation
 
     classify = _hlta().make_classify(HLTA_PATH.parent / "checkpoints" / "terrain_classifier.pt")
     sim = Simulation()

@@ -10,13 +10,13 @@ import shutil
 from pathlib import Path
 
 import pytest
+from leaderboard_records import demo_records, mutated, synthetic_record
 from typer.testing import CliRunner
 
 from hexbench import leaderboard as lb
-from hexbench import scoring
 from hexbench.cli import app
-from hexbench.tasks import load_suite
-from leaderboard_records import demo_records, mutated, synthetic_record
+from hexbench.suite import scoring
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 PAPER_REFERENCE = REPO / "leaderboard" / "paper_reference.json"
@@ -306,8 +306,8 @@ def test_cli_add_refuses_a_record_without_its_run_folder(tmp_path, records):
 
 
 def test_cli_add_replays_a_run_copies_it_with_its_admission_and_rebuilds(tmp_path, tiny_protocol):
-    from hexbench.evaluate import evaluate
-    from hexbench.tasks import load_suite
+    from hexbench.evaluation.evaluate import evaluate
+    from hexbench.suite.tasks import load_suite
 
     run = tmp_path / "run"
     res = evaluate(str(REPO / "baselines" / "cpg.py"), list(load_suite("v1").tasks), run, workers=1, record=False,
@@ -339,10 +339,10 @@ def test_cli_add_replays_a_run_copies_it_with_its_admission_and_rebuilds(tmp_pat
 
 
 def test_add_refuses_a_forged_run_and_one_made_in_process(tmp_path, tiny_protocol):
-    from hexbench.evaluate import evaluate
-    from hexbench.records import episodes_digest
-    from hexbench.scoring import summarize_levels, summarize_terrains
-    from hexbench.tasks import load_suite
+    from hexbench.artifacts.records import episodes_digest
+    from hexbench.evaluation.evaluate import evaluate
+    from hexbench.suite.scoring import summarize_levels, summarize_terrains
+    from hexbench.suite.tasks import load_suite
 
     tasks = list(load_suite("v1").tasks)
     run = tmp_path / "run"

@@ -17,9 +17,9 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
+from leaderboard_records import demo_records
 
 from hexbench import leaderboard as lb
-from leaderboard_records import demo_records
 
 REPO = Path(__file__).resolve().parent.parent
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",

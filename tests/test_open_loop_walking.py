@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import hexbench  # noqa: F401
-from hexbench.tasks import load_suite
+from hexbench.suite.tasks import load_suite
 
 SUITE = load_suite("v1")
 LOWEST = [("flat", None), ("rough", 3.0), ("slopes", 6.0), ("stairs", 2.0)]

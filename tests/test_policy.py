@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from hexbench.policy import BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController, waypoint_horizon_m
-from hexbench.tasks import load_suite
+from hexbench.agents.policy import BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController, waypoint_horizon_m
+from hexbench.suite.tasks import load_suite
 
 
 class RecordingPolicy:

@@ -2,7 +2,7 @@
 
 import pytest
 
-from hexbench.protocol import EpisodeJudge, EpisodeRules
+from hexbench.world.protocol import EpisodeJudge, EpisodeRules
 
 UPRIGHT = 1.0
 

@@ -148,7 +148,7 @@ class Cluster:
                 pass
         psutil.wait_procs(procs, timeout=20)
         shutil.rmtree(self.temp, ignore_errors=True)
-        # the scratch folders its killed Ray workers left (hexbench.engines prunes those of dead workers too)
+        # the scratch folders its killed Ray workers left (hexbench.evaluation.engines prunes those of dead workers too)
         root = Path(tempfile.gettempdir()) / f"hexbench-ray-{os.getuid()}"
         for folder in root.glob("[0-9]*"):
             if not psutil.pid_exists(int(folder.name)):
@@ -169,7 +169,8 @@ def cluster():
 def module_tiny_protocol(tmp_path_factory):
     """tests/conftest.py's tiny protocol, for the whole module (the cluster and its runs are shared)."""
     from conftest import TINY_PROTOCOL
-    from hexbench.tasks import load_suite
+
+    from hexbench.suite.tasks import load_suite
 
     folder = tmp_path_factory.mktemp("tiny_tasks_ray")
     (folder / "protocol_v1.toml").write_text(TINY_PROTOCOL)
@@ -214,7 +215,7 @@ def _same_record(local: Path, ray: Path) -> None:
     assert b["episodes_digest"] == a["episodes_digest"]
     import pandas as pd
 
-    from hexbench.files import sha256_file
+    from hexbench.artifacts.files import sha256_file
 
     # every field, the MCAP hash included; not the .rrd's: Rerun's files differ between any two
     # recordings of the same episode, in one process too (the MCAP is byte-reproducible)
@@ -248,7 +249,7 @@ def _controller_processes(cluster: Cluster) -> list:
     found = []
     for p in cluster.processes():
         try:
-            if p.name() == "bwrap" or "hexbench.controller_host" in " ".join(p.cmdline()):
+            if p.name() == "bwrap" or "hexbench.evaluation.controller_host" in " ".join(p.cmdline()):
                 found.append(p.pid)
         except psutil.Error:
             pass

@@ -16,14 +16,14 @@ import pytest
 from typer.testing import CliRunner
 
 from hexbench.cli import app
-from hexbench.env import HexapodEnv
-from hexbench.evaluate import EpisodeJob, run_episode
+from hexbench.evaluation.episode import EpisodeJob, run_episode
 from hexbench.recording import make_episode_recorder
 from hexbench.recording.mcap_episode import METRICS_SCHEMA, TOPICS
 from hexbench.recording.reader import EpisodeFileError, check_integrity, metrics, read_episode
 from hexbench.recording.rerun_episode import verify_rrd
-from hexbench.robot import JOINT_NAMES, urdf_text
-from hexbench.tasks import load_suite
+from hexbench.suite.tasks import load_suite
+from hexbench.world.env import HexapodEnv
+from hexbench.world.robot import JOINT_NAMES, urdf_text
 
 REPO = Path(__file__).resolve().parent.parent
 CPG = str(REPO / "baselines" / "cpg.py")
@@ -334,7 +334,7 @@ def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
 
 
 def test_episode_commands(tmp_path):
-    from hexbench.evaluate import evaluate
+    from hexbench.evaluation.evaluate import evaluate
 
     out = tmp_path / "run"
     result = evaluate(CPG, [load_suite("v1").task("stairs", 2.0)], out, episodes=1, workers=1, progress=False)
@@ -478,7 +478,7 @@ def _all_message_records(data: bytes):
 def test_rrd_can_be_built_from_the_mcap(tmp_path):
     """Episodes recorded MCAP-only (RecordingConfig(write_rrd=False)) still get a Rerun file on demand."""
     from hexbench.recording import RecordingConfig
-    from hexbench.recording.rrd_from_mcap import rrd_from_mcap
+    from hexbench.replay.rrd_from_mcap import rrd_from_mcap
 
     env = HexapodEnv(terrain="stairs", level=4.0, max_steps=40)
     env.reset(seed=2)

@@ -96,7 +96,7 @@ CASES: dict[str, Case] = {
     "attack_os_exit": Case(ERROR, then_cpg=True),
     "attack_segfault": Case(ERROR, then_cpg=True),
     "attack_hang_make": Case(ERROR, max_s=30.0, extra_args=("--make-timeout", "5")),
-    # a call that waits (sleeps) rather than computes gets up to 10 s of wall time (hexbench.sandbox.Limits)
+    # a call that waits (sleeps) rather than computes gets up to 10 s of wall time (hexbench.evaluation.sandbox.Limits)
     "attack_swallow_timeout": Case(ERROR, max_s=30.0, error_words=TIMEOUT_WORDS),
     "attack_ignore_sigalrm": Case(ERROR, max_s=20.0, error_words=TIMEOUT_WORDS),
     "attack_c_busy_act": Case(ERROR, max_s=20.0, error_words=TIMEOUT_WORDS),

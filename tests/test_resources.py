@@ -10,7 +10,7 @@ import psutil
 import pybullet as p
 
 import hexbench  # noqa: F401
-from hexbench.env import EnvConfig, HexapodEnv
+from hexbench.world.env import EnvConfig, HexapodEnv
 
 MAX_GROWTH_MB = 50.0
 

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from hexbench.env import EnvConfig, HexapodEnv
-from hexbench.rewards import TABLE1_WEIGHTS, difficulty_factor, early_end_penalty
+from hexbench.world.env import EnvConfig, HexapodEnv
+from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, early_end_penalty
 
 
 def _first_end(penalty: bool, **rules):

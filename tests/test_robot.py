@@ -10,9 +10,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from hexbench.robot import FOOT_LINK_NAMES, JOINT_NAMES, LEG_NAMES, NUM_JOINTS, JetHexaSpec, urdf_text
-from hexbench.sim import PhysicsConfig, Simulation, _urdf_file
-from hexbench.terrain import FlatTerrain
+from hexbench.world.robot import FOOT_LINK_NAMES, JOINT_NAMES, LEG_NAMES, NUM_JOINTS, JetHexaSpec, urdf_text
+from hexbench.world.sim import PhysicsConfig, Simulation, _urdf_file
+from hexbench.world.terrain import FlatTerrain
 
 SPEC = JetHexaSpec()
 

@@ -10,10 +10,11 @@ import psutil
 import pytest
 from typer.testing import CliRunner
 
-from hexbench import sandbox
 from hexbench.cli import app
-from hexbench.evaluate import EpisodeJob, evaluate, run_episode
-from hexbench.tasks import load_suite
+from hexbench.evaluation import sandbox
+from hexbench.evaluation.episode import EpisodeJob, run_episode
+from hexbench.evaluation.evaluate import evaluate
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 CPG = str(REPO / "baselines" / "cpg.py")

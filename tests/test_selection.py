@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 
-from hexbench.selection import SELECTION_LEVELS, heldout_seeds
-from hexbench.tasks import load_suite
+from hexbench.suite.tasks import load_suite
+from hexbench.training.selection import SELECTION_LEVELS, heldout_seeds
 from tests.test_train import run_cli, train_tiny
 
 

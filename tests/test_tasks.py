@@ -4,7 +4,7 @@ from dataclasses import replace
 
 import pytest
 
-from hexbench.tasks import episode_seed, load_suite
+from hexbench.suite.tasks import episode_seed, load_suite
 
 PAPER_LEVELS = {
     "rough": [3, 4, 5, 6, 7, 8, 9, 10, 11, 12],
@@ -66,7 +66,7 @@ def test_select_levels_in_paper_units():
 
 
 def test_readme_lists_every_registered_id(repo):
-    from hexbench.tasks import registered_ids
+    from hexbench.suite.tasks import registered_ids
 
     readme = (repo / "README.md").read_text()
     missing = [i for i in registered_ids() if f"`{i}`" not in readme]

@@ -9,9 +9,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from hexbench.env import CURRICULA
-from hexbench.tasks import load_suite
-from hexbench.terrain import (
+from hexbench.suite.tasks import load_suite
+from hexbench.world.env import CURRICULA
+from hexbench.world.terrain import (
     COURSE_END_X_M,
     COURSE_HALF_WIDTH_M,
     COURSE_START_X_M,
@@ -188,8 +188,14 @@ def test_unknown_terrain_names_the_valid_ones() -> None:
 
 @pytest.mark.parametrize("level", [1, 2, 3])
 def test_mixed_course_is_rough_then_slope_then_stairs(client: int, level: int) -> None:
-    from hexbench.terrain import (MIXED_COURSE_LEVELS, MIXED_END_X_M, MIXED_GOAL_DISTANCE_M, MIXED_ROUGH_END_X_M,
-                                  MIXED_SLOPE_START_X_M, MIXED_STAIRS_START_X_M)
+    from hexbench.world.terrain import (
+        MIXED_COURSE_LEVELS,
+        MIXED_END_X_M,
+        MIXED_GOAL_DISTANCE_M,
+        MIXED_ROUGH_END_X_M,
+        MIXED_SLOPE_START_X_M,
+        MIXED_STAIRS_START_X_M,
+    )
 
     rough_cm, slope_deg, stairs_cm = MIXED_COURSE_LEVELS[level]
     built = build(client, "mixed", level, seed=level)

@@ -12,8 +12,14 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+from hexbench.agents.policy import (
+    CheckpointError,
+    ConfigError,
+    make_policy_controller,
+    scale_observation,
+    validate_config,
+)
 from hexbench.cli import app
-from hexbench.policy import CheckpointError, ConfigError, make_policy_controller, scale_observation, validate_config
 
 REPO = Path(__file__).resolve().parent.parent
 BASELINES = REPO / "baselines"
@@ -24,7 +30,7 @@ OFF_POLICY = ("sac", "td3", "sac_cpg", "td3_cpg")
 
 
 def task(terrain: str, level: float):
-    from hexbench.tasks import load_suite
+    from hexbench.suite.tasks import load_suite
 
     return load_suite().task(terrain, level)
 
@@ -73,7 +79,7 @@ def test_ppo_cpg_smoke_run_writes_checkpoint_csv_and_resumes(tmp_path):
 
 
 def test_reward_normaliser_statistics_are_checkpointed_and_restored(tmp_path):
-    from hexbench.train import make_vec_env, restore_reward_normalizer
+    from hexbench.training.train import make_vec_env, restore_reward_normalizer
 
     out = tmp_path / "run"
     assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
@@ -138,7 +144,7 @@ def test_every_baseline_trains_through_the_cli(tmp_path, method):
 
 def test_hrl_starts_from_the_cpg_gait_and_walks(tmp_path):
     """A just-started HRL policy (one tiny update) acts near its initial_action and walks 2.5 m."""
-    from hexbench.env import HexapodEnv
+    from hexbench.world.env import HexapodEnv
 
     out, dest = tmp_path / "run", tmp_path / "checkpoints"
     assert train_tiny("hrl", out, steps=64).exit_code == 0
@@ -174,9 +180,9 @@ def test_initial_action_of_the_wrong_size_or_algo_is_one_line(tmp_path):
 def test_publish_then_controller_acts_like_the_trained_policy(tmp_path, method):
     from stable_baselines3.common.save_util import load_from_zip_file
 
-    from hexbench.env import HexapodEnv
-    from hexbench.policy import algo_class
-    from hexbench.tasks import load_suite
+    from hexbench.agents.policy import algo_class
+    from hexbench.suite.tasks import load_suite
+    from hexbench.world.env import HexapodEnv
 
     out, dest = tmp_path / "run", tmp_path / "checkpoints"
     assert train_tiny(method, out, steps=64).exit_code == 0
@@ -231,8 +237,8 @@ def test_corrupt_missing_or_unlisted_shipped_checkpoint_is_refused(tmp_path):
 def test_init_from_shipped_weights_starts_from_that_policy(tmp_path):
     """A warm-started run acts like the shipped policy before it learns (learning rate 0), with the
     config's own exploration std; the source is recorded in run.json."""
-    from hexbench.env import HexapodEnv
-    from hexbench.policy import algo_class
+    from hexbench.agents.policy import algo_class
+    from hexbench.world.env import HexapodEnv
 
     shipped = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
     out = tmp_path / "warm"
@@ -267,7 +273,8 @@ def test_value_warmup_holds_the_actor_then_lets_it_learn(tmp_path):
     updates here) exactly as shipped; past N, resumed, it learns."""
     import torch
 
-    from hexbench.policy import algo_class, load_policy_weights, read_manifest
+    from hexbench.agents.policy import algo_class, load_policy_weights
+    from hexbench.artifacts.manifest import read_manifest
 
     shipped = REPO / "baselines" / "checkpoints" / "ppo_cpg-rough.zip"
     source = load_policy_weights(shipped, read_manifest(shipped.parent)["checkpoints"]["ppo_cpg-rough"]["sha256"])
@@ -293,7 +300,7 @@ def test_value_warmup_holds_a_fresh_actor_too(tmp_path):
     while the value function learns; off-policy baselines, which have no value function, refuse it."""
     import torch
 
-    from hexbench.policy import algo_class
+    from hexbench.agents.policy import algo_class
 
     def actor(name: str, *extra: str) -> dict:
         out = tmp_path / name
@@ -315,8 +322,8 @@ def test_value_warmup_holds_a_fresh_actor_too(tmp_path):
 def test_gsde_trained_weights_act_under_the_plain_config(tmp_path):
     """gSDE changes only how PPO explores (log_std becomes a matrix): its published weights load
     into the baseline's plain config and act as the trained model's deterministic policy."""
-    from hexbench.env import HexapodEnv
-    from hexbench.policy import algo_class
+    from hexbench.agents.policy import algo_class
+    from hexbench.world.env import HexapodEnv
 
     out, dest = tmp_path / "sde", tmp_path / "checkpoints"
     result = train_tiny("ppo_cpg", out, extra=("--set", "use_sde=True", "--set", "sde_sample_freq=8"))

@@ -7,13 +7,13 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from hexbench.artifacts.records import episodes_digest
 from hexbench.cli import app
-from hexbench.evaluate import evaluate
-from hexbench.records import episodes_digest
-from hexbench.scoring import summarize_levels, summarize_terrains
-from hexbench.seeds import SeedSet
-from hexbench.tasks import load_suite
-from hexbench.verify import verify_run
+from hexbench.evaluation.evaluate import evaluate
+from hexbench.replay.verify import verify_run
+from hexbench.suite.scoring import summarize_levels, summarize_terrains
+from hexbench.suite.seeds import SeedSet
+from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
 CPG = str(REPO / "baselines" / "cpg.py")

@@ -46,8 +46,16 @@ def register(app: typer.Typer) -> None:
 
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
-        from hexbench.classifier import DEFAULT_CHECKPOINT, TrainConfig, evaluate, load_split, predict, save_checkpoint, train
-        from hexbench.dataset.build import MANIFEST_NAME, sha256_file
+        from hexbench.perception.classifier import (
+            DEFAULT_CHECKPOINT,
+            TrainConfig,
+            evaluate,
+            load_split,
+            predict,
+            save_checkpoint,
+            train,
+        )
+        from hexbench.perception.dataset.build import MANIFEST_NAME, sha256_file
 
         out = out or DEFAULT_CHECKPOINT
         try:
@@ -85,8 +93,16 @@ def register(app: typer.Typer) -> None:
         """Accuracy, per-class precision/recall and a confusion-matrix PNG."""
         import json
 
-        from hexbench.classifier import (DEFAULT_CHECKPOINT, ChecksumError, evaluate, load_classifier, load_split,
-                                         plot_confusion, predict, sidecar_path)
+        from hexbench.perception.classifier import (
+            DEFAULT_CHECKPOINT,
+            ChecksumError,
+            evaluate,
+            load_classifier,
+            load_split,
+            plot_confusion,
+            predict,
+            sidecar_path,
+        )
 
         if split not in ("train", "test", "all"):
             _fail(f"unknown split {split!r}; valid: train, test, all")

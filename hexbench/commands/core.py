@@ -15,7 +15,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from hexbench.tasks import format_level, load_suite, registered_ids
+        from hexbench.suite.tasks import format_level, load_suite, registered_ids
 
         suite = load_suite(protocol)
         table = Table(title=f"hexbench protocol {protocol}")
@@ -52,7 +52,7 @@ def print_success_table(record: dict, console) -> None:
     terminal), with 95% Wilson intervals, then the terrain summary."""
     from rich.table import Table
 
-    from hexbench.tasks import format_level
+    from hexbench.suite.tasks import format_level
 
     for terrain in record["terrains"]:
         name = terrain["terrain"]
@@ -125,12 +125,12 @@ def _register_run(app: typer.Typer) -> None:
 
         from rich.console import Console
 
-        from hexbench import engines
         from hexbench.errors import HexbenchError
-        from hexbench.evaluate import evaluate
-        from hexbench.sandbox import resolve_isolation
-        from hexbench.seeds import SeedSet, read_seed_key
-        from hexbench.tasks import load_suite
+        from hexbench.evaluation import engines
+        from hexbench.evaluation.evaluate import evaluate
+        from hexbench.evaluation.sandbox import resolve_isolation
+        from hexbench.suite.seeds import SeedSet, read_seed_key
+        from hexbench.suite.tasks import load_suite
 
         console = Console()
         err = Console(stderr=True, soft_wrap=True)
@@ -205,10 +205,10 @@ def _register_run(app: typer.Typer) -> None:
 
         from rich.console import Console
 
-        from hexbench import sandbox
         from hexbench.errors import HexbenchError
-        from hexbench.evaluate import EpisodeJob, run_episode
-        from hexbench.tasks import load_suite
+        from hexbench.evaluation import sandbox
+        from hexbench.evaluation.episode import EpisodeJob, run_episode
+        from hexbench.suite.tasks import load_suite
 
         console = Console()
         try:

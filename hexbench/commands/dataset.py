@@ -33,7 +33,7 @@ def register(app: typer.Typer) -> None:
         """Render the dataset from the robot camera: {train,test}/{rough,slopes,stairs}/*.png + manifest.json."""
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        from hexbench.dataset.build import BuildConfig, build_terrain_images
+        from hexbench.perception.dataset.build import BuildConfig, build_terrain_images
 
         _check_name(name)
         try:
@@ -55,7 +55,7 @@ def register(app: typer.Typer) -> None:
     @group.command("verify")
     def verify(folder: Path = typer.Argument(..., help="a build or downloaded dataset folder")) -> None:
         """Check every file of a dataset folder against its manifest's sha256."""
-        from hexbench.dataset.build import verify_build
+        from hexbench.perception.dataset.build import verify_build
 
         try:
             problems = verify_build(folder)
@@ -73,8 +73,8 @@ def register(app: typer.Typer) -> None:
         import numpy as np
         from PIL import Image, ImageDraw
 
-        from hexbench.dataset.build import load_manifest
-        from hexbench.dataset.views import TERRAIN_CLASSES
+        from hexbench.perception.dataset.build import load_manifest
+        from hexbench.perception.views import TERRAIN_CLASSES
 
         try:
             files = load_manifest(folder)["files"]
@@ -102,8 +102,8 @@ def register(app: typer.Typer) -> None:
                  registry: Optional[Path] = typer.Option(None, "--registry", help="registry TOML (default datasets/registry.toml)"),
                  data_dir: Optional[Path] = typer.Option(None, "--data-dir", help="cache folder (default $HEXBENCH_DATA_DIR or the user cache)")) -> None:
         """Download the published archive with pooch, verify its sha256 and extract it safely."""
-        from hexbench.dataset.registry import DownloadError
-        from hexbench.dataset.registry import download as fetch
+        from hexbench.perception.dataset.registry import DownloadError
+        from hexbench.perception.dataset.registry import download as fetch
 
         _check_name(name)
         try:
@@ -119,9 +119,14 @@ def register(app: typer.Typer) -> None:
                 url: list[str] = typer.Option([], "--url", help="mirror URL(s) of the archive (repeatable)"),
                 update_registry: bool = typer.Option(False, "--update-registry", help="write the entry into datasets/registry.toml")) -> None:
         """Pack a build into a deterministic .tar.gz and print its registry entry."""
-        from hexbench.dataset.archive import pack_build
-        from hexbench.dataset.build import load_manifest, verify_build
-        from hexbench.dataset.registry import REGISTRY_PATH, load_registry, registry_entry_for, write_registry
+        from hexbench.perception.dataset.archive import pack_build
+        from hexbench.perception.dataset.build import load_manifest, verify_build
+        from hexbench.perception.dataset.registry import (
+            REGISTRY_PATH,
+            load_registry,
+            registry_entry_for,
+            write_registry,
+        )
 
         _check_name(name)
         try:

@@ -1,4 +1,4 @@
-"""`hexbench leaderboard build` and `hexbench leaderboard add RESULT.json` (see hexbench/leaderboard.py)."""
+"""`hexbench leaderboard build` and `hexbench leaderboard add RESULT.json` (see hexbench/leaderboard/__init__.py)."""
 
 from __future__ import annotations
 
@@ -57,7 +57,7 @@ def register(app: typer.Typer) -> None:
 
         from hexbench.errors import HexbenchError
         from hexbench.leaderboard import RecordError, add, build
-        from hexbench.seeds import read_seed_key
+        from hexbench.suite.seeds import read_seed_key
 
         try:
             seed_set = read_seed_key(seed_key) if seed_key else None

@@ -71,7 +71,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from hexbench.env import END_REASONS
+        from hexbench.world.env import END_REASONS
 
         root = Path(run_dir)
         if not root.is_dir():
@@ -134,7 +134,7 @@ def register(app: typer.Typer) -> None:
         p = Path(episode)
         if p.suffix in (".mcap", ".rrd") and not p.with_suffix(".rrd").is_file() and p.with_suffix(".mcap").is_file():
             from hexbench.recording.reader import EpisodeFileError
-            from hexbench.recording.rrd_from_mcap import rrd_from_mcap
+            from hexbench.replay.rrd_from_mcap import rrd_from_mcap
 
             try:  # recorded without an .rrd: build it from the MCAP once
                 rrd_from_mcap(p.with_suffix(".mcap"), p.with_suffix(".rrd"))
@@ -161,8 +161,8 @@ def register(app: typer.Typer) -> None:
 
         p = Path(path)
         if p.is_dir():
-            from hexbench.seeds import read_seed_key
-            from hexbench.verify import verify_run
+            from hexbench.replay.verify import verify_run
+            from hexbench.suite.seeds import read_seed_key
 
             try:
                 seed_set = read_seed_key(seed_key) if seed_key else None
@@ -174,7 +174,7 @@ def register(app: typer.Typer) -> None:
                 _fail(report.message)
             typer.echo(f"ok: {report.message}")
             return
-        from hexbench.recording.verify import verify_episode
+        from hexbench.replay.recording_verify import verify_episode
 
         result = verify_episode(_episode_file(path, ".mcap"))
         if not result.ok:
@@ -193,7 +193,7 @@ def register(app: typer.Typer) -> None:
             import minari  # noqa: F401
         except ImportError:
             _fail("minari is not installed; install the optional extra with: pip install 'hexbench[minari]'")
-        from hexbench.recording.minari_export import export_run
+        from hexbench.replay.minari_export import export_run
 
         try:
             path = export_run(Path(run_dir), dataset_id)

@@ -1,4 +1,4 @@
-"""`hexbench sweep epsilon --terrain T`: the residual-scale search of paper 3.2 (hexbench.sweep)."""
+"""`hexbench sweep epsilon --terrain T`: the residual-scale search of paper 3.2 (hexbench.training.sweep)."""
 
 from __future__ import annotations
 
@@ -28,8 +28,8 @@ def register(app: typer.Typer) -> None:
         from rich.progress import Progress
         from rich.table import Table
 
-        from hexbench.sweep import PAPER_EPS, EpsilonSweep, best_eps, run_sweep
-        from hexbench.train import TrainError, parse_override
+        from hexbench.training.sweep import PAPER_EPS, EpsilonSweep, best_eps, run_sweep
+        from hexbench.training.train import TrainError, parse_override
 
         console = Console(stderr=True)
         try:
@@ -74,7 +74,7 @@ def register(app: typer.Typer) -> None:
         """Plot eps sweeps (score against eps, best and paper's eps marked); copy their CSVs beside the PNG."""
         from rich.console import Console
 
-        from hexbench.sweep import SweepError, plot_sweeps
+        from hexbench.training.sweep import SweepError, plot_sweeps
 
         try:
             written = plot_sweeps(sources, out)

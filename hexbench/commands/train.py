@@ -1,4 +1,4 @@
-"""`hexbench train FILE --terrain T`: train a baseline file on a terrain's curriculum (hexbench.train)."""
+"""`hexbench train FILE --terrain T`: train a baseline file on a terrain's curriculum (hexbench.training.train)."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def register(app: typer.Typer) -> None:
         """Train a baseline (PPO/SAC/TD3 per its CONFIG) on the paper's curriculum; resumes a run."""
         from rich.console import Console
 
-        from hexbench.train import TrainError, TrainSettings, parse_curriculum, parse_override, train
+        from hexbench.training.train import TrainError, TrainSettings, parse_curriculum, parse_override, train
 
         err = Console(stderr=True)
         try:
@@ -66,7 +66,7 @@ def register(app: typer.Typer) -> None:
         """Copy a run's checkpoint (policy weights only) into baselines/checkpoints/ with its manifest entry."""
         from rich.console import Console
 
-        from hexbench.train import TrainError, publish_checkpoint
+        from hexbench.training.train import TrainError, publish_checkpoint
 
         console = Console(stderr=True)
         try:
@@ -81,7 +81,7 @@ def register(app: typer.Typer) -> None:
     def select_command(
         run_dir: Path = typer.Argument(..., help="training run directory (holds run.json)"),
         episodes: int = typer.Option(3, "--episodes", help="held-out episodes per selection level"),
-        levels: list[float] = typer.Option([], "--level", help="selection level (repeatable) [default: hexbench.selection.SELECTION_LEVELS]"),
+        levels: list[float] = typer.Option([], "--level", help="selection level (repeatable) [default: hexbench.training.selection.SELECTION_LEVELS]"),
         stride: int = typer.Option(1, "--stride", help="score every N-th checkpoint (and the last)"),
         min_env_steps: int = typer.Option(None, "--min-env-steps", help="score no checkpoint before this many env steps"),
         max_env_steps: int = typer.Option(None, "--max-env-steps", help="score no checkpoint beyond this many env steps"),
@@ -92,7 +92,7 @@ def register(app: typer.Typer) -> None:
         from rich.console import Console
         from rich.table import Table
 
-        from hexbench.selection import SelectionError, checkpoint_score, select
+        from hexbench.training.selection import SelectionError, checkpoint_score, select
 
         console = Console(stderr=True)
         try:
@@ -123,7 +123,7 @@ def register(app: typer.Typer) -> None:
         """Check every shipped checkpoint's sha256 against the manifest."""
         from rich.console import Console
 
-        from hexbench.policy import CheckpointError, read_manifest, verify_checkpoint
+        from hexbench.artifacts.manifest import CheckpointError, read_manifest, verify_checkpoint
 
         console = Console(stderr=True)
         try:
@@ -154,7 +154,7 @@ def register(app: typer.Typer) -> None:
         """Plot episode reward, success rate and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
         from rich.console import Console
 
-        from hexbench.curves import CurvesError, plot_curves
+        from hexbench.training.curves import CurvesError, plot_curves
 
         console = Console(stderr=True)
         try:

@@ -19,7 +19,7 @@ from operator import itemgetter
 
 import numpy as np
 
-from hexbench.robot import FOOT_LINK_NAMES, JOINT_NAMES
+from hexbench.world.robot import FOOT_LINK_NAMES, JOINT_NAMES
 
 
 @dataclass(frozen=True)
@@ -134,7 +134,7 @@ class EpisodeCapture:
                 return np.zeros((0, width))
             return np.concatenate(values).astype(np.float64, copy=False).reshape(m, width)
 
-        # RobotState fields are views into one float64 vector per step (hexbench.sim.RobotState.values):
+        # RobotState fields are views into one float64 vector per step (hexbench.world.sim.RobotState.values):
         # stack those vectors once and take each field's columns at the offset its view has
         values0 = getattr(states[0], "values", None)
         packed = (np.concatenate([s.values for s in states]).reshape(len(states), -1)

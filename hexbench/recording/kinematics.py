@@ -91,7 +91,7 @@ def link_poses(frames: list[JointFrame], base_pos_m: np.ndarray, base_quat_xyzw:
     """World pose of every link frame: {link: ((n, 3) position, (n, 4) xyzw quaternion)}.
 
     Forward kinematics over the joints in file order (a parent's joint comes before its
-    children's, as in `hexbench.robot.urdf_text`), vectorised over the n rows.
+    children's, as in `hexbench.world.robot.urdf_text`), vectorised over the n rows.
     """
     rel = joint_rotations(frames, angles_rad)  # (n, J, 4)
     poses = {base_link: (np.asarray(base_pos_m, dtype=np.float64), np.asarray(base_quat_xyzw, dtype=np.float64))}

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.robot import LEG_NAMES
+from hexbench.world.robot import LEG_NAMES
 
 
 class EpisodeFileError(Exception):

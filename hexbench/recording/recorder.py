@@ -48,9 +48,9 @@ def _json_value(v):
 def _library_id() -> str:
     import mcap
 
-    import hexbench
+    from hexbench.artifacts.provenance import HEXBENCH_VERSION
 
-    return f"hexbench/{hexbench.__version__} mcap-python/{getattr(mcap, '__version__', '?')}"
+    return f"hexbench/{HEXBENCH_VERSION} mcap-python/{getattr(mcap, '__version__', '?')}"
 
 
 class EpisodeRecorder:
@@ -79,7 +79,7 @@ class EpisodeRecorder:
 
     # -------------------------------------------------------------- callbacks
     def on_reset(self, env) -> None:
-        from hexbench.robot import urdf_text
+        from hexbench.world.robot import urdf_text
 
         urdf = urdf_text(env.sim.robot_spec)
         self._static = {"urdf": urdf, "joints": _frames(urdf), "mesh": terrain_mesh(env.sim.terrain),

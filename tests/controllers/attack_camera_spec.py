@@ -1,6 +1,6 @@
 """Attack: a camera whose parameters make the evaluator's renderer hang (fov_deg = 1e-6).
 
-A seeing controller (hexbench.controller.SeeingController) declares the body-mounted camera it
+A seeing controller (hexbench.suite.controller.SeeingController) declares the body-mounted camera it
 wants; the evaluator renders the image itself (PyBullet's TinyRenderer) and sends it. This file
 declares a CameraSpec with a field of view of 1e-6 degrees: every finite number and the pixel count
 pass a plain sanity check, but TinyRenderer then takes minutes (or forever) on the first image,
@@ -13,7 +13,7 @@ honest run (exit 0, success False), within 20 s.
 
 import numpy as np
 
-from hexbench.camera import CameraSpec
+from hexbench.world.camera import CameraSpec
 
 
 class Seeing:

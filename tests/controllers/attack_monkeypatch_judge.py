@@ -1,6 +1,6 @@
 """Attack: monkeypatch the episode judge at import time so every episode is a success.
 
-On import the file replaces hexbench.protocol.EpisodeJudge (and the name hexbench.env imported
+On import the file replaces hexbench.world.protocol.EpisodeJudge (and the name hexbench.world.env imported
 from it) with a subclass whose end_reason() says "success" from the third step on, and also
 patches the original class's end_reason in place (for judges already built).
 
@@ -13,10 +13,10 @@ stops with one error line.
 import numpy as np
 
 try:
-    import hexbench.env
-    import hexbench.protocol
+    import hexbench.world.env
+    import hexbench.world.protocol
 
-    _Original = hexbench.protocol.EpisodeJudge
+    _Original = hexbench.world.protocol.EpisodeJudge
     _original_end_reason = _Original.end_reason
 
     def _forged_end_reason(self, *, step, progress_m, lateral_m, up_z):
@@ -27,8 +27,8 @@ try:
     class ForgedJudge(_Original):
         end_reason = _forged_end_reason
 
-    hexbench.protocol.EpisodeJudge = ForgedJudge
-    hexbench.env.EpisodeJudge = ForgedJudge
+    hexbench.world.protocol.EpisodeJudge = ForgedJudge
+    hexbench.world.env.EpisodeJudge = ForgedJudge
     _Original.end_reason = _forged_end_reason
 except Exception:  # noqa: BLE001 - nothing to patch: act honestly
     pass

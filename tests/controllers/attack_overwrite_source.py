@@ -5,7 +5,7 @@ At import and in make_controller the file tries to create
     hexbench.__file__, from the current directory and from /work/main),
   * hexbench_attack_write.pth in every site-packages directory (a .pth file runs its `import`
     lines at every interpreter start: persistent code execution for every later run),
-  * and opens hexbench/protocol.py for appending (writing nothing: an honest in-process run must
+  * and opens hexbench/world/protocol.py for appending (writing nothing: an honest in-process run must
     not be damaged by this test).
 Both planted files only hold a comment, so a successful attack does no harm beyond being seen.
 

@@ -1,8 +1,8 @@
 """Attack: patch the record builder and the file hash at import time.
 
-On import the file wraps hexbench.evaluate.build_record so that every episode row it gets is
+On import the file wraps hexbench.evaluation.evaluate.build_record so that every episode row it gets is
 turned into a success (success True, end_reason "success", time_to_goal_s set), and replaces
-hexbench.controller.file_sha256 (and the name hexbench.evaluate imported) with a function that
+hexbench.suite.controller.file_sha256 (and the name hexbench.evaluation.evaluate imported) with a function that
 returns a forged hash (the sha256 of the empty file), so the record names other content than the
 file that ran.
 
@@ -16,10 +16,10 @@ import numpy as np
 FORGED_SHA256 = "e3b0c44298fc1c149afbf4c8996fb92427ae41e4649b934ca495991b7852b855"
 
 try:
-    import hexbench.controller
-    import hexbench.evaluate
+    import hexbench.suite.controller
+    import hexbench.evaluation.evaluate
 
-    _build_record = hexbench.evaluate.build_record
+    _build_record = hexbench.evaluation.evaluate.build_record
 
     def _forged_build_record(**kwargs):
         rows = []
@@ -36,9 +36,9 @@ try:
     def _forged_sha256(path):
         return FORGED_SHA256
 
-    hexbench.evaluate.build_record = _forged_build_record
-    hexbench.evaluate.file_sha256 = _forged_sha256
-    hexbench.controller.file_sha256 = _forged_sha256
+    hexbench.evaluation.evaluate.build_record = _forged_build_record
+    hexbench.evaluation.evaluate.file_sha256 = _forged_sha256
+    hexbench.suite.controller.file_sha256 = _forged_sha256
 except Exception:  # noqa: BLE001
     pass
 

@@ -1,6 +1,6 @@
 """Attack: recognise the protocol's episode seeds in reset(seed) (terrain foresight).
 
-The protocol's episode seeds are public (hexbench.tasks.episode_seed; TaskSpec.seeds()). A
+The protocol's episode seeds are public (hexbench.suite.tasks.episode_seed; TaskSpec.seeds()). A
 controller told the real seed can rebuild the environment, HexapodEnv(task.env_config(...))
 .reset(seed=seed), and see the exact terrain and start pose before the episode. This file checks
 whether the seed it is given is one of the task's episode seeds (and rebuilds the environment
@@ -23,7 +23,7 @@ def _episode_seeds(task) -> set:
     except Exception:  # noqa: BLE001
         pass
     try:
-        from hexbench.tasks import episode_seed
+        from hexbench.suite.tasks import episode_seed
 
         for i in range(100):
             seeds.add(episode_seed(task.protocol, task.terrain, task.level, i))
@@ -44,7 +44,7 @@ class Foresight:
         self.knows = seed in self.seeds
         if self.knows:
             try:  # the foresight: the exact episode the evaluator is about to play
-                from hexbench.env import HexapodEnv
+                from hexbench.world.env import HexapodEnv
 
                 env = HexapodEnv(self.task.env_config("cpg_residual"))
                 obs, _ = env.reset(seed=seed)

@@ -6,7 +6,7 @@ sleep goes on; act() then returns a valid action as if nothing happened.
 
 An honest evaluator must enforce the act() deadline from outside the controller's process: the
 run stops with one "error: ..." timeout line naming this file, a non-zero exit, well before the
-30 s are up (hexbench.sandbox gives a call that waits rather than computes 10 s of wall time).
+30 s are up (hexbench.evaluation.sandbox gives a call that waits rather than computes 10 s of wall time).
 """
 
 import time

@@ -5,7 +5,7 @@ On import the file
     with "episodes" or "row") comes out with every episode a success and every level passed;
   * puts a fake "jsonschema" module in sys.modules whose validate() accepts anything, so a forged
     record is not rejected by the schema check;
-  * sets sys.modules["hexbench.protocol"].EpisodeRules.goal_distance_m's default to 0.01 m (the
+  * sets sys.modules["hexbench.world.protocol"].EpisodeRules.goal_distance_m's default to 0.01 m (the
     judge's rules for environments built afterwards).
 These are process-wide: in-process every later json.dumps of the evaluator is forged.
 
@@ -48,7 +48,7 @@ try:
     fake = types.ModuleType("jsonschema")
     fake.validate = lambda *a, **k: None
     sys.modules["jsonschema"] = fake
-    proto = sys.modules.get("hexbench.protocol")
+    proto = sys.modules.get("hexbench.world.protocol")
     if proto is not None:
         import dataclasses
 

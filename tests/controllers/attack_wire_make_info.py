@@ -1,7 +1,7 @@
 """Attack: answer make_controller with well-formed JSON of the wrong shape.
 
 At import this file wraps the host's send (the `Host` class of the running __main__ module,
-hexbench.controller_host in a sandbox) so that its reply to MAKE (what the controller declares:
+hexbench.evaluation.controller_host in a sandbox) so that its reply to MAKE (what the controller declares:
 action mode, methods, camera, checkpoint paths) is valid JSON but not an object: `[]`. A
 parser that checks only for malformed JSON then calls .get on a list (AttributeError). In-process
 there is no host: the attack does nothing and the controller walks the open-loop CPG.

@@ -2,7 +2,7 @@
 
 Everything in the controller's process is the controller's to change, the sandbox's own host code
 included. At import this file wraps the host's send (the `Host` class of the running __main__
-module, hexbench.controller_host in a sandbox) so that every ACTION message it sends carries, as
+module, hexbench.evaluation.controller_host in a sandbox) so that every ACTION message it sends carries, as
 its JSON header line, 2,000 nested arrays ("[[[[...]]]]", 4 kB): a parser with a recursion limit
 raises RecursionError, which is not a ValueError. In-process there is no host: the attack does
 nothing and the controller walks the open-loop CPG.

@@ -1,6 +1,6 @@
 import numpy as np
 
-from hexbench.camera import CameraSpec
+from hexbench.world.camera import CameraSpec
 
 
 class BlindAfterOneLook:

@@ -1,0 +1,1 @@
+"""Controllers built from shipped weights (the trained baselines)."""

@@ -1,0 +1,275 @@
+"""Trained baseline policies: baseline configs, observation scaling, verified checkpoints, controllers.
+
+A baseline file (baselines/*.py) defines a frozen config dataclass at its top and `CONFIG = Config()`.
+Every config has these fields, read here and by hexbench.training.train:
+
+    algo           "ppo", "sac" or "td3" (the Stable-Baselines3 class)
+    action_mode    "joint", "cpg_residual" or "cpg_params" (see hexbench.world.env)
+    net_arch       hidden layer sizes, e.g. (256, 256, 256, 256) (actor and critic alike)
+    activation     "relu" or "tanh"
+    residual_scale eps of eq. 6 (None: the terrain default of paper 3.2)
+    log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
+    action_noise_std (optional; TD3, SAC) std of Gaussian exploration noise added to actions
+    initial_action (optional; PPO) the policy's mean action before training (hexbench.training.train)
+
+and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
+
+Checkpoints. Nothing is unpickled from a file whose sha256 was not checked first:
+  * shipped weights (baselines/checkpoints/<method>-<terrain>.zip) hold only the policy's
+    state_dict, and of SAC's and TD3's only the actor (ACTING_PREFIXES: the critics serve learning);
+    `baselines/checkpoints/manifest.json` records each file's sha256. Loading reads
+    the manifest, hashes the file, and only then opens the zip with SB3's `load_from_zip_file(...,
+    load_data=False)`, which reads tensors with `torch.load(weights_only=True)` and skips the
+    cloudpickled "data" entry altogether. The network is rebuilt from the baseline's config.
+  * training checkpoints (full SB3 models, for resuming) are verified against the run's own
+    run.json before `ALGO.load` (see hexbench.training.train).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, fields, is_dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hexbench.artifacts.files import sha256_file
+from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
+from hexbench.world.env import ACTION_MODES, OBS_DIM
+
+ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
+ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
+# Config fields that are not SB3 constructor arguments.
+NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
+                                           "log_std_init", "action_noise_std", "early_end_penalty",
+                                           "normalize_reward", "initial_action"})
+
+# Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
+# [rad/s] are divided by 5 to bring them to O(1) like the other groups (positions [rad], torques
+# [N m], base pose [m, rad], target [m]).
+OBS_SCALE = np.concatenate([
+    np.ones(18), np.full(18, 0.2), np.ones(18), np.ones(3), np.ones(3), np.ones(2),
+]).astype(np.float32)
+assert OBS_SCALE.shape == (OBS_DIM,)
+
+
+class ConfigError(ValueError):
+    """A baseline file's CONFIG is missing or invalid; the message is one line."""
+
+
+def scale_observation(obs: np.ndarray) -> np.ndarray:
+    return (np.asarray(obs, dtype=np.float32) * OBS_SCALE).astype(np.float32)
+
+
+# ----------------------------------------------------------------------------- configs
+def validate_config(config, where: str = "CONFIG") -> None:
+    if config is None or not is_dataclass(config):
+        raise ConfigError(f"{where}: expected a module-level CONFIG dataclass instance")
+    names = {f.name for f in fields(config)}
+    missing = sorted({"algo", "action_mode", "net_arch", "activation"} - names)
+    if missing:
+        raise ConfigError(f"{where}: CONFIG is not a training config (lacks field(s) {', '.join(missing)})")
+    if config.algo not in ALGOS:
+        raise ConfigError(f"{where}: algo {config.algo!r} unknown; valid: {', '.join(ALGOS)}")
+    if config.action_mode not in ACTION_MODES:
+        raise ConfigError(f"{where}: action_mode {config.action_mode!r} unknown; valid: {', '.join(ACTION_MODES)}")
+    if config.activation not in ACTIVATIONS:
+        raise ConfigError(f"{where}: activation {config.activation!r} unknown; valid: {', '.join(ACTIVATIONS)}")
+    initial_action = getattr(config, "initial_action", None)
+    if initial_action is not None:
+        n = action_dim(config.action_mode)
+        if config.algo != "ppo":
+            raise ConfigError(f"{where}: initial_action is supported for algo 'ppo' only, not {config.algo!r}")
+        if len(initial_action) != n or not all(-1.0 <= float(a) <= 1.0 for a in initial_action):
+            raise ConfigError(f"{where}: initial_action must be {n} numbers in [-1, 1] for action_mode "
+                              f"{config.action_mode!r}; got {tuple(initial_action)}")
+
+
+def algo_class(algo: str):
+    import stable_baselines3 as sb3
+
+    return {"ppo": sb3.PPO, "sac": sb3.SAC, "td3": sb3.TD3}[algo]
+
+
+def policy_kwargs(config) -> dict:
+    import torch.nn as nn
+
+    activation = {"relu": nn.ReLU, "tanh": nn.Tanh}[config.activation]
+    out = {"net_arch": list(config.net_arch), "activation_fn": activation}
+    if getattr(config, "log_std_init", None) is not None:
+        out["log_std_init"] = float(config.log_std_init)
+    return out
+
+
+def sb3_kwargs(config) -> dict:
+    """The config's SB3 constructor arguments (all fields except NON_SB3_FIELDS)."""
+    out = {k: v for k, v in asdict(config).items() if k not in NON_SB3_FIELDS}
+    for k, v in out.items():
+        if isinstance(v, list):
+            out[k] = tuple(v)
+    return out
+
+
+def action_noise(config):
+    """SB3 action noise object for a config's optional `action_noise_std` (None when absent)."""
+    std = getattr(config, "action_noise_std", None)
+    if not std:
+        return None
+    from stable_baselines3.common.noise import NormalActionNoise
+
+    n = action_dim(config.action_mode)
+    return NormalActionNoise(mean=np.zeros(n), sigma=np.full(n, float(std)))
+
+
+def config_dict(config) -> dict:
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()}
+
+
+def action_dim(action_mode: str) -> int:
+    return 4 if action_mode == "cpg_params" else 18
+
+
+def build_policy(config):
+    """An untrained SB3 policy network with the config's architecture (for loading weights)."""
+    import gymnasium as gym
+
+    from hexbench.world.env import OBS_HIGH
+
+    obs_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
+    act_space = gym.spaces.Box(-1.0, 1.0, (action_dim(config.action_mode),), dtype=np.float32)
+    cls = algo_class(config.algo)
+    policy_cls = cls.policy_aliases["MlpPolicy"]
+    # gSDE (a PPO constructor argument, which SB3 hands to its policy) changes the shape of log_std
+    sde = {"use_sde": True} if getattr(config, "use_sde", False) else {}
+    return policy_cls(obs_space, act_space, lambda _progress: 0.0, **policy_kwargs(config), **sde)
+
+
+# ----------------------------------------------------------------------------- checkpoints
+def load_policy_weights(path: Path, expected_sha256: str) -> dict:
+    """Verify, then read the policy state_dict (tensors only; the pickled 'data' entry is skipped)."""
+    from stable_baselines3.common.save_util import load_from_zip_file
+
+    verify_checkpoint(path, expected_sha256)
+    try:
+        _data, params, _vars = load_from_zip_file(path, load_data=False, device="cpu")
+    except Exception as e:  # noqa: BLE001 - any failure becomes one line
+        raise CheckpointError(f"{path}: cannot be read as an SB3 checkpoint ({type(e).__name__}: {e})") from None
+    if "policy" not in params:
+        raise CheckpointError(f"{path}: holds no policy weights")
+    return params["policy"]
+
+
+def save_policy_weights(policy_state: dict, path: Path) -> str:
+    """Write a policy-only SB3 zip (no pickled data) atomically; returns its sha256."""
+    from stable_baselines3.common.save_util import save_to_zip_file
+
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp.zip")
+    save_to_zip_file(tmp, data=None, params={"policy": policy_state})
+    tmp.replace(path)
+    return sha256_file(path)
+
+
+# Parts of an SB3 policy that acting needs. PPO ships its whole policy (its value head is small);
+# SAC's and TD3's critics (and their target copies) are three times the actor and serve learning only.
+ACTING_PREFIXES: dict[str, tuple[str, ...]] = {"ppo": ("",), "sac": ("actor.",), "td3": ("actor.",)}
+
+
+# Policy entries that only exploration uses (SB3 PPO's Gaussian log std).
+EXPLORATION_KEYS: frozenset[str] = frozenset({"log_std"})
+
+
+def acting_weights(algo: str, policy_state: dict) -> dict:
+    """The entries of a policy state_dict that acting needs (what ships in baselines/checkpoints/)."""
+    return {k: v for k, v in policy_state.items() if k.startswith(ACTING_PREFIXES[algo])}
+
+
+def fit_weights(policy, state: dict, path: Path, needed) -> None:
+    """Load `state` into `policy` (non-strict); CheckpointError unless every key with needed(key)
+    is there and nothing is left over (a network of another shape)."""
+    try:
+        result = policy.load_state_dict(state, strict=False)
+    except RuntimeError as e:
+        first = str(e).splitlines()[0]
+        raise CheckpointError(f"{path}: weights do not fit the config's network ({first})") from None
+    missing = [k for k in result.missing_keys if needed(k)]
+    if missing or result.unexpected_keys:
+        what = f"missing {missing[0]}" if missing else f"unexpected {result.unexpected_keys[0]}"
+        raise CheckpointError(f"{path}: weights do not fit the config's network ({what}; "
+                              f"{len(missing)} missing, {len(result.unexpected_keys)} unexpected)")
+
+
+def load_policy(config, path: Path, expected_sha256: str):
+    """A policy of the config's network with the verified weights of `path` (full or acting-only)."""
+    policy = build_policy(config)
+    # PPO's log_std is exploration only: the deterministic policy never reads it, and its shape
+    # depends on how it explored (a vector, or a matrix under gSDE), so it is not loaded
+    state = {k: v for k, v in load_policy_weights(path, expected_sha256).items() if k not in EXPLORATION_KEYS}
+    fit_weights(policy, state, path,
+                needed=lambda k: k.startswith(ACTING_PREFIXES[config.algo]) and k not in EXPLORATION_KEYS)
+    policy.set_training_mode(False)
+    return policy
+
+
+def shipped_checkpoint(checkpoints_dir: Path, method: str, terrain: str) -> tuple[Path, dict]:
+    """(path, manifest entry) of the shipped weights for method x terrain; CheckpointError if none."""
+    return entry_for(checkpoints_dir, f"{method}-{terrain}")
+
+
+class PolicyController:
+    """A trained SB3 policy behind the hexbench Controller protocol (deterministic actions)."""
+
+    def __init__(self, action_mode: str, policy, checkpoint_sha256: str = "", checkpoint_path: Path | None = None,
+                 target_horizon_m: float | None = None):
+        self.action_mode = action_mode
+        self.policy = policy
+        # On a course longer than the training goal distance, the target the policy sees is held at
+        # most this far ahead of the base (a waypoint on the way to the goal), as in training.
+        self.target_horizon_m = target_horizon_m
+        self.checkpoint_sha256 = checkpoint_sha256
+        # the weights files behind this controller (result records list them with their sha256)
+        self.checkpoint_paths = [Path(checkpoint_path)] if checkpoint_path is not None else []
+
+    def reset(self, seed: int) -> None:  # deterministic policy: nothing to reseed
+        pass
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        if self.target_horizon_m is not None:
+            obs = np.array(obs, copy=True)
+            obs[TARGET_X_INDEX] = min(obs[TARGET_X_INDEX], obs[BASE_X_INDEX] + self.target_horizon_m)
+        action, _ = self.policy.predict(scale_observation(obs), deterministic=True)
+        return np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+
+
+# Courses without weights of their own and the policy that walks them: the mixed course gets the
+# rough-terrain policy (paper Table 5 runs the rough model on slopes and stairs the same way).
+POLICY_TERRAIN: dict[str, str] = {"mixed": "rough"}
+# Policies train with the goal 2.5 m ahead (paper 4.1); on a longer course (the mixed course, 6.3 m)
+# they see a waypoint at most this far ahead of the base instead of a goal they never met in training.
+TRAINING_GOAL_DISTANCE_M = 2.5
+BASE_X_INDEX, TARGET_X_INDEX = 54, 60  # observation layout, hexbench/world/env.py
+
+
+def waypoint_horizon_m(goal_distance_m: float) -> float | None:
+    """How far ahead of the base a policy sees its target on a course of this goal distance [m].
+
+    None (the goal itself) unless the course is longer than training's; the one rule for every
+    policy controller, the HLTA's terrain policies included.
+    """
+    return TRAINING_GOAL_DISTANCE_M if goal_distance_m > TRAINING_GOAL_DISTANCE_M else None
+
+
+def make_policy_controller(config, checkpoints_dir: Path, method: str, task,
+                           weights_terrain: str | None = None) -> PolicyController:
+    """What a baseline file's make_controller(task) returns: its shipped weights for the task.
+
+    The weights are those of `weights_terrain` if given, else of the task's terrain (POLICY_TERRAIN
+    for a course without weights of its own); the target horizon follows the task's goal distance.
+    """
+    import torch
+
+    torch.set_num_threads(1)
+    validate_config(config, method)
+    terrain = weights_terrain or POLICY_TERRAIN.get(task.terrain, task.terrain)
+    path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
+    policy = load_policy(config, path, entry["sha256"])
+    return PolicyController(config.action_mode, policy, entry["sha256"], path, waypoint_horizon_m(task.goal_distance_m))

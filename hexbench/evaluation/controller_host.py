@@ -1,0 +1,155 @@
+"""The controller process: runs a submitted controller file behind the wire, nothing else.
+
+Started by `hexbench.evaluation.sandbox` as `python -I -B -m hexbench.evaluation.controller_host IN_FD OUT_FD` inside the
+sandbox. It first forbids itself new processes and network sockets (seccomp, where libseccomp is
+available: a filter no later code can lift), then imports the controller file and answers the
+evaluator's messages (hexbench.evaluation.wire): build a controller per task, reset it, and turn each
+observation into an action. Everything it sends is plain data: the action's dtype, shape and
+bytes, never an object; the evaluator checks it all again.
+
+This module is the only hexbench code that runs in the untrusted process; the controller can
+change anything here, which is why the evaluator trusts nothing it says.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import sys
+
+import numpy as np
+
+from hexbench.evaluation import wire
+
+CLONE_THREAD = 0x00010000
+AF_UNIX = 1
+
+
+def forbid_processes_and_network() -> str:
+    """Install a seccomp filter: no fork/vfork/clone without CLONE_THREAD, clone3 unavailable (glibc
+    falls back to clone), sockets only of the AF_UNIX family. Returns what was installed."""
+    try:
+        import pyseccomp as seccomp
+    except Exception:  # noqa: BLE001 - libseccomp or its binding missing: the sandbox records "seccomp: off"
+        return "off"
+    try:
+        flt = seccomp.SyscallFilter(seccomp.ALLOW)
+        for call in ("fork", "vfork"):
+            flt.add_rule(seccomp.ERRNO(errno.EPERM), call)
+        flt.add_rule(seccomp.ERRNO(errno.ENOSYS), "clone3")
+        flt.add_rule(seccomp.ERRNO(errno.EPERM), "clone", seccomp.Arg(0, seccomp.MASKED_EQ, CLONE_THREAD, 0))
+        flt.add_rule(seccomp.ERRNO(errno.EPERM), "socket", seccomp.Arg(0, seccomp.NE, AF_UNIX))
+        for call in ("ptrace", "process_vm_readv", "process_vm_writev"):
+            flt.add_rule(seccomp.ERRNO(errno.EPERM), call)
+        flt.load()
+    except Exception:  # noqa: BLE001
+        return "off"
+    return "on"
+
+
+def declared(ctrl) -> dict:
+    """What the evaluator needs to know of a built controller, as plain data."""
+    camera = getattr(ctrl, "camera", None)
+    info = {"action_mode": getattr(ctrl, "action_mode", None), "has_reset": callable(getattr(ctrl, "reset", None)),
+            "has_act": callable(getattr(ctrl, "act", None)), "has_see": callable(getattr(ctrl, "see", None)),
+            "camera": None, "camera_type": None,
+            "camera_every_steps": getattr(ctrl, "camera_every_steps", None),
+            "checkpoint_paths": [str(p) for p in (getattr(ctrl, "checkpoint_paths", None) or [])]}
+    if camera is not None:
+        info["camera_type"] = f"{type(camera).__module__}.{type(camera).__qualname__}"
+        if dataclasses.is_dataclass(camera):
+            info["camera"] = dataclasses.asdict(camera)
+    if not isinstance(info["action_mode"], str):
+        info["action_mode"] = repr(info["action_mode"])[:80]
+    if not isinstance(info["camera_every_steps"], int):
+        info["camera_every_steps"] = None if info["camera_every_steps"] is None else repr(info["camera_every_steps"])[:80]
+    return info
+
+
+def action_message(action) -> bytes:
+    if not isinstance(action, np.ndarray):
+        return wire.array_payload({"type": type(action).__name__}, b"")
+    plain = np.ndarray.view(action, np.ndarray)
+    if plain.dtype.kind != "f" or plain.dtype.itemsize not in (4, 8):
+        return wire.array_payload({"type": "ndarray", "dtype": str(plain.dtype), "shape": list(plain.shape)}, b"")
+    if plain.size > 4096:  # far beyond any action: its shape says enough
+        return wire.array_payload({"type": "ndarray", "dtype": f"<f{plain.dtype.itemsize}",
+                                   "shape": list(plain.shape)[:8], "truncated": True}, b"")
+    data = np.ascontiguousarray(plain, dtype=plain.dtype.newbyteorder("<"))
+    return wire.array_payload({"type": "ndarray", "dtype": f"<f{plain.dtype.itemsize}", "shape": list(plain.shape)},
+                              data.tobytes())
+
+
+class Host:
+    def __init__(self, in_fd: int, out_fd: int):
+        self.in_fd, self.out_fd = in_fd, out_fd
+        self.module = None
+        self.controllers: dict[str, object] = {}
+        self.current = None
+
+    def send(self, kind: bytes, payload: bytes = b"") -> None:
+        wire.write_all(self.out_fd, wire.frame(kind, payload))
+
+    def make(self, request: dict) -> None:
+        from hexbench.suite.controller import load_controller_module
+        from hexbench.suite.tasks import TaskSpec
+
+        if self.module is None:
+            self.module = load_controller_module(request["file"])  # ControllerError: one line, sent as ERROR
+        task = TaskSpec(**request["task"])
+        name = task.name  # taken before the controller sees (and could change) the task
+        ctrl = self.module.make_controller(task)
+        self.controllers[name] = ctrl
+        self.send(wire.OK, wire.json_payload(declared(ctrl)))
+
+    def handle(self, kind: bytes, payload: bytes) -> None:
+        if kind == wire.ACT:
+            obs = np.frombuffer(payload, dtype="<f4").astype(np.float32)
+            self.send(wire.ACTION, action_message(self.current.act(obs)))
+        elif kind == wire.RESET:
+            request = wire_json(payload)
+            self.current = self.controllers[request["task"]]
+            self.current.reset(int(request["seed"]))
+            self.send(wire.OK)
+        elif kind == wire.SEE:
+            header, raw = wire.split_array_payload(payload)
+            image = np.frombuffer(raw, dtype=np.uint8).reshape(header["shape"]).copy()
+            self.current.see(image)
+            self.send(wire.OK)
+        elif kind == wire.MAKE:
+            self.make(wire_json(payload))
+        else:
+            raise ValueError(f"unknown message kind {kind!r}")
+
+    def serve(self) -> None:
+        while True:
+            try:
+                kind, payload = wire.recv_blocking(self.in_fd)
+            except EOFError:
+                return
+            if kind == wire.QUIT:
+                return
+            try:
+                self.handle(kind, payload)
+            except BaseException as e:  # noqa: BLE001 - the controller's failures are reported, never raised
+                self.send(wire.ERROR, wire.json_payload({"type": type(e).__name__[:100],
+                                                         "message": " ".join(str(e).split())[:500]}))
+
+
+def wire_json(payload: bytes) -> dict:
+    import json
+
+    return json.loads(payload)
+
+
+def main(argv: list[str]) -> None:
+    in_fd, out_fd, seccomp = int(argv[1]), int(argv[2]), argv[3] if len(argv) > 3 else "on"
+    if seccomp == "on" and forbid_processes_and_network() != "on":
+        wire.write_all(out_fd, wire.frame(wire.ERROR, wire.json_payload(
+            {"message": "the sandbox could not install its seccomp filter (is libseccomp2 installed?)"})))
+        return
+    Host(in_fd, out_fd).serve()
+
+
+if __name__ == "__main__":
+    main(sys.argv)

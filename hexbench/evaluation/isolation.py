@@ -1,0 +1,214 @@
+"""How a controller process is isolated: the modes, their resource limits, and how each is started.
+
+`bubblewrap` (the default where `bwrap` works), `process` (the fallback) and `none` (in-process,
+for debugging; the leaderboard refuses its records) are described in hexbench.evaluation.sandbox,
+which starts the processes. This module decides which mode applies, what a record says about it,
+what the process may see (`visible_paths`, `bwrap_argv`), its environment and its rlimits.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import os
+import resource
+import shutil
+import signal
+import stat
+import subprocess
+import sys
+from dataclasses import dataclass
+from functools import lru_cache
+from pathlib import Path
+
+from hexbench.errors import HexbenchError
+
+ISOLATIONS: tuple[str, ...] = ("bubblewrap", "process", "none")
+SANDBOX_UID = 65534  # nobody
+@dataclass(frozen=True)
+class Limits:
+    """What a controller process may use; the deadlines are enforced by the evaluator."""
+
+    address_space_bytes: int = 4 << 30
+    cpu_time_s: int = 4 * 3600  # RLIMIT_CPU of the controller process, over its whole life
+    open_files: int = 256
+    file_size_bytes: int = 64 << 20  # largest file it may write (in its scratch folder)
+    scratch_bytes: int = 256 << 20  # size of the scratch folder (bubblewrap's tmpfs)
+    small_tmpfs_bytes: int = 16 << 20  # size of /tmp and /dev/shm in the sandbox
+    make_timeout_s: float = 120.0  # start-up, import and make_controller(task) [s]
+    call_timeout_s: float = 1.0  # CPU time of the controller's process tree per reset(), act() or see() (protocol v1) [s]
+    call_wall_timeout_s: float = 10.0  # wall time per call, for controllers that wait instead of computing [s]
+
+
+DEFAULT_LIMITS = Limits()
+
+
+# ------------------------------------------------------------------------------ isolation choice
+@lru_cache(maxsize=1)
+def bubblewrap_version() -> str | None:
+    """bubblewrap's version if `bwrap` is installed and can make a sandbox here, else None."""
+    exe = shutil.which("bwrap")
+    if exe is None:
+        return None
+    try:
+        probe = subprocess.run([exe, "--unshare-all", "--die-with-parent", "--ro-bind", "/", "/", "true"],
+                               capture_output=True, timeout=20)
+        version = subprocess.run([exe, "--version"], capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if probe.returncode != 0:
+        return None
+    return version.stdout.strip().replace("bubblewrap ", "") or "unknown"
+
+
+@lru_cache(maxsize=1)
+def seccomp_available() -> bool:
+    try:
+        import pyseccomp  # noqa: F401
+    except Exception:  # noqa: BLE001
+        return False
+    return True
+
+
+def resolve_isolation(requested: str) -> str:
+    """'auto' -> bubblewrap where it works, else process; a named mode must be usable here."""
+    if requested == "auto":
+        return "bubblewrap" if bubblewrap_version() else "process"
+    if requested not in ISOLATIONS:
+        raise HexbenchError(f"unknown isolation {requested!r}; valid: auto, {', '.join(ISOLATIONS)}")
+    if requested == "bubblewrap" and not bubblewrap_version():
+        raise HexbenchError("bubblewrap is not usable here (Debian: apt-get install bubblewrap); "
+                            "or choose --isolation process")
+    return requested
+
+
+def runs_as_nobody(controller_file: str | Path) -> bool:
+    """Whether a root evaluator starts this file's controller process as `nobody`: only when nobody
+    can read the controller, the Python executable and everything the sandbox shows (a Python
+    under /root, say, cannot be; then bubblewrap's user namespace maps uid 65534 onto root, with
+    every capability dropped and only the read-only binds visible)."""
+    path = Path(controller_file).resolve()
+    return os.geteuid() == 0 and all(readable_by_others(p) for p in
+                                     [path, Path(sys.executable).resolve(), *visible_paths(path.parent)])
+
+
+def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file: str | Path | None = None) -> dict:
+    """The isolation a run's controller processes ran under, as stored in its record."""
+    if mode == "none":
+        return {"mode": "none", "sandboxed": False}
+    if os.geteuid() != 0:
+        user = "the evaluating user"
+    elif controller_file is not None and runs_as_nobody(controller_file):
+        user = "nobody"
+    else:
+        user = "uid 65534 in a user namespace mapped to root, no capabilities" if mode == "bubblewrap" \
+            else "root (the Python environment is not readable by nobody)"
+    record = {"mode": mode, "sandboxed": True, "seccomp": "no new processes, AF_UNIX sockets only"
+              if seccomp_available() else "off",
+              "user": user,
+              "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,
+              "make_timeout_s": limits.make_timeout_s, "call_timeout_s": limits.call_timeout_s}
+    if mode == "bubblewrap":
+        record.update(bubblewrap=bubblewrap_version(), network="none (own network namespace)",
+                      filesystem="read-only: Python environment, hexbench, controller folder; private scratch")
+    else:
+        record.update(network="blocked by seccomp" if seccomp_available() else "open",
+                      filesystem="not hidden (process fallback)")
+    return record
+
+
+# ----------------------------------------------------------------------------- process start
+def readable_by_others(path: Path) -> bool:
+    """Whether `nobody` can read `path` (world r, and world x on every folder above it)."""
+    try:
+        path = path.resolve()
+        for parent in reversed(path.parents):
+            if not os.stat(parent).st_mode & stat.S_IXOTH:
+                return False
+        mode = os.stat(path).st_mode
+    except OSError:
+        return False
+    return bool(mode & stat.S_IROTH) and (not stat.S_ISDIR(mode) or bool(mode & stat.S_IXOTH))
+
+
+def visible_paths(controller_dir: Path) -> list[Path]:
+    """What the controller process may read: the Python environment, hexbench, the task files and
+    the controller's folder (bubblewrap binds exactly these, read-only)."""
+    from hexbench.artifacts.provenance import PACKAGE_DIR
+    from hexbench.suite.tasks import tasks_dir
+
+    prefixes = {Path(p).resolve() for p in (sys.prefix, sys.base_prefix, sys.exec_prefix)}
+    paths = {*prefixes, Path(sys.executable).resolve().parent, PACKAGE_DIR,
+             tasks_dir().resolve(), controller_dir}
+    # sys.path entries of the Python environment only: never the working directory or a source tree
+    # (a repository root holds run folders, seed keys and other people's results)
+    for entry in sys.path:
+        if entry and Path(entry).exists():
+            resolved = Path(entry).resolve()
+            if any(resolved == q or q in resolved.parents for q in prefixes) \
+                    or resolved.name in ("site-packages", "dist-packages"):
+                paths.add(resolved)
+    out = []
+    for p in sorted({q.resolve() for q in paths if q.exists()}):
+        if not any(p != q and q in p.parents for q in out):
+            out.append(p)
+    return out
+
+
+SYSTEM_DIRS = ("/usr", "/bin", "/sbin", "/lib", "/lib64", "/lib32")
+SYSTEM_FILES = ("/etc/ld.so.cache", "/etc/ld.so.conf", "/etc/localtime", "/etc/passwd", "/etc/group")
+
+
+def bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = ()) -> list[str]:
+    argv = ["bwrap", "--unshare-all", "--unshare-user", "--uid", str(SANDBOX_UID), "--gid", str(SANDBOX_UID),
+            "--cap-drop", "ALL", "--die-with-parent", "--new-session", "--hostname", "sandbox"]
+    for d in SYSTEM_DIRS:
+        if os.path.islink(d):
+            argv += ["--symlink", os.readlink(d), d]
+        elif os.path.isdir(d):
+            argv += ["--ro-bind", d, d]
+    for f in SYSTEM_FILES:
+        argv += ["--ro-bind-try", f, f]
+    # before the binds (a controller may live in /tmp); every writable tmpfs is sized: RAM written
+    # there is not counted by the address-space limit
+    small = str(limits.small_tmpfs_bytes)
+    argv += ["--proc", "/proc", "--dev", "/dev", "--size", small, "--tmpfs", "/dev/shm", "--size", small, "--tmpfs", "/tmp"]
+    visible = visible_paths(controller_dir)
+    for p in visible:
+        argv += ["--ro-bind", str(p), str(p)]
+    for h in hidden:  # the run's journal and logs, a seed key: never visible, even inside a visible folder
+        path = Path(h).resolve()
+        if path == controller_dir or path in controller_dir.parents:
+            continue  # the controller's own folder stays visible (the caller hides what lies inside it)
+        if any(path == v or v in path.parents for v in visible) and path.exists():
+            argv += ["--size", "4096", "--tmpfs", str(path)] if path.is_dir() else ["--ro-bind", "/dev/null", str(path)]
+    argv += ["--size", str(limits.scratch_bytes), "--tmpfs", "/scratch", "--chdir", "/scratch"]
+    return argv
+
+
+def clean_env(home: str) -> dict[str, str]:
+    env = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": home, "TMPDIR": home, "LANG": "C.UTF-8",
+           "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+    if os.environ.get("HEXBENCH_TASKS_DIR"):
+        env["HEXBENCH_TASKS_DIR"] = os.environ["HEXBENCH_TASKS_DIR"]
+    return env
+
+
+def preexec_for(limits: Limits, drop_to_nobody: bool, die_with_parent: bool):
+    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+
+    def run() -> None:  # runs in the child between fork and exec
+        for what, value in ((resource.RLIMIT_AS, limits.address_space_bytes),
+                            (resource.RLIMIT_CPU, limits.cpu_time_s),
+                            (resource.RLIMIT_NOFILE, limits.open_files),
+                            (resource.RLIMIT_FSIZE, limits.file_size_bytes),
+                            (resource.RLIMIT_CORE, 0)):
+            resource.setrlimit(what, (value, value))
+        if die_with_parent:
+            libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+        if drop_to_nobody:
+            os.setgroups([])
+            os.setgid(SANDBOX_UID)
+            os.setuid(SANDBOX_UID)
+
+    return run

@@ -1,0 +1,366 @@
+"""The controller sandbox: a submitted controller runs in a process of its own, isolated, and only
+exchanges observations (and camera images) for actions with the evaluator.
+
+Isolation modes (what every record states, `isolation_record`):
+  bubblewrap  (default where `bwrap` works) the controller process runs under bubblewrap: new user,
+              PID, network, IPC and UTS namespaces (no network at all; it sees only its own
+              processes), all capabilities dropped, a read-only view of only the Python
+              environment, hexbench's package and task files and the controller's own folder, a
+              private /tmp and a size-limited scratch working folder, a clean environment, its own
+              session. When the evaluator runs as root the sandbox is started as `nobody`.
+  process     (fallback where bubblewrap is missing) a plain child process: own session, clean
+              environment, scratch working folder, `nobody` when the evaluator is root. The file
+              system is not hidden: it can read what `nobody` can read and write world-writable
+              folders such as /tmp. Use it only where bubblewrap cannot be installed.
+  none        the controller runs inside the evaluator (debugging only): it can reach the simulator
+              and forge its score; records say so and the leaderboard refuses them.
+In both sandboxed modes: resource limits (address space 4 GiB, CPU time, open files, file size),
+a seccomp filter installed before the controller is imported (no new processes, no sockets but
+AF_UNIX; hexbench.evaluation.controller_host), and deadlines enforced from outside: the evaluator waits for
+each answer with a timeout and kills the controller's whole process tree when it passes. Killing
+bubblewrap ends its PID namespace, so nothing the controller started outlives it; a dying
+evaluator takes it along (`--die-with-parent`, PR_SET_PDEATHSIG).
+
+The evaluator trusts nothing the controller process says: messages are size-limited and parsed as
+plain data (hexbench.evaluation.wire); actions are checked again by `hexbench.suite.controller.check_action`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import select
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from hexbench.artifacts.files import sha256_file
+from hexbench.evaluation import wire
+from hexbench.evaluation.in_process import InProcessController
+from hexbench.evaluation.isolation import (
+    DEFAULT_LIMITS,
+    ISOLATIONS,
+    SANDBOX_UID,
+    Limits,
+    bubblewrap_version,
+    bwrap_argv,
+    clean_env,
+    isolation_record,
+    preexec_for,
+    resolve_isolation,
+    runs_as_nobody,
+    seccomp_available,
+)
+from hexbench.evaluation.remote import NotAnArray, RemoteController, WrongDtype, one_line
+from hexbench.suite.controller import ControllerError
+
+_CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+CPU_SAMPLE_EVERY_CALLS = 64  # how often the controller's CPU time is sampled (the sample a slow call is measured from)
+
+
+class _Deadline:
+    """When to give up on an answer: CPU time of the controller (from the latest sample: at most
+    CPU_SAMPLE_EVERY_CALLS calls old, so it may include a few ms of earlier calls) and wall time."""
+
+    def __init__(self, process: "ControllerProcess", cpu_s: float | None, wall_s: float):
+        self.process, self.cpu_s, self.wall_s = process, cpu_s, wall_s
+        self.start = time.monotonic()
+        self.expired_on_cpu = False
+
+    def wait_s(self) -> float:
+        """Seconds to wait before checking again; 0 when expired."""
+        elapsed = time.monotonic() - self.start
+        if elapsed >= self.wall_s:
+            return 0.0
+        if self.cpu_s is None or elapsed < self.cpu_s:
+            return min(self.wall_s, self.cpu_s or self.wall_s) - elapsed
+        used = self.process.cpu_seconds() - self.process._cpu_sample
+        if used >= self.cpu_s:
+            self.expired_on_cpu = True
+            return 0.0
+        return min(0.1, self.wall_s - elapsed)
+
+
+def _signal_name(number: int) -> str:
+    try:
+        return signal.Signals(number).name
+    except ValueError:
+        return f"signal {number}"
+
+
+class ControllerProcess:
+    """One sandboxed controller process for one controller file; builds a controller per task."""
+
+    def __init__(self, controller_file: str, isolation: str, limits: Limits = DEFAULT_LIMITS,
+                 hidden: tuple[str, ...] = ()):
+        self.file = str(controller_file)
+        self.path = Path(controller_file).resolve()
+        self.isolation, self.limits, self.hidden = isolation, limits, hidden
+        self.proc: subprocess.Popen | None = None
+        self.built: dict[str, RemoteController] = {}
+        self._calls, self._cpu_sample = 0, 0.0
+        self._start()
+
+    def _start(self) -> None:
+        if not self.path.is_file():
+            raise ControllerError(f"{self.file}: no such controller file")
+        self._tmp = tempfile.mkdtemp(prefix="hexbench-sandbox-")
+        self._stderr = open(Path(self._tmp) / "stderr", "w+b")
+        to_child_r, self._to_child = os.pipe()
+        self._from_child, from_child_w = os.pipe()
+        host = [sys.executable, "-I", "-B", "-m", "hexbench.evaluation.controller_host", str(to_child_r), str(from_child_w),
+                "on" if seccomp_available() else "off"]
+        drop = runs_as_nobody(self.path)
+        if self.isolation == "bubblewrap":
+            argv, cwd, env, die = bwrap_argv(self.path.parent, self.limits, self.hidden) + ["--"] + host, "/", \
+                clean_env("/scratch"), False
+        else:
+            scratch = Path(self._tmp) / "scratch"
+            scratch.mkdir()
+            if drop:
+                os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
+                os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
+            argv, cwd, env, die = host, str(scratch), clean_env(str(scratch)), True
+        try:
+            self.proc = subprocess.Popen(argv, pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL,
+                                         stdout=subprocess.DEVNULL, stderr=self._stderr, cwd=cwd, env=env,
+                                         start_new_session=True, preexec_fn=preexec_for(self.limits, drop, die))
+        except OSError as e:
+            raise ControllerError(f"{self.file}: the controller process could not start ({e})") from None
+        finally:
+            os.close(to_child_r)
+            os.close(from_child_w)
+        os.set_blocking(self._to_child, False)
+        self._poll_in = select.poll()
+        self._poll_in.register(self._from_child, select.POLLIN | select.POLLHUP | select.POLLERR)
+        self._poll_out = select.poll()
+        self._poll_out.register(self._to_child, select.POLLOUT | select.POLLERR)
+
+    # -- wire
+    def _fail(self, problem: str, context: str) -> ControllerError:
+        self.kill()
+        return ControllerError(f"{self.file}: {problem} {context}".rstrip())
+
+    def _died(self, context: str) -> ControllerError:
+        try:
+            code = self.proc.wait(timeout=5)
+        except subprocess.TimeoutExpired:
+            code = None
+        self.kill()
+        # bubblewrap reports its child's death by signal N as exit code 128 + N
+        signum = -code if code is not None and code < 0 else \
+            code - 128 if code is not None and code > 128 and self.isolation == "bubblewrap" else None
+        if code is None:
+            what = "the controller process closed its channel"
+        elif signum == signal.SIGSEGV:
+            what = "the controller process crashed (SIGSEGV)"
+        elif signum is not None:
+            what = f"the controller process was killed by {_signal_name(signum)}"
+            if signum in (signal.SIGKILL, signal.SIGXCPU):
+                what += " (a resource limit?)"
+        else:
+            what = f"the controller process exited with code {code}"
+        tail = self._stderr_tail() if context == "during start-up" else ""
+        return ControllerError(f"{self.file}: {what} {context}{': ' + tail if tail else ''}")
+
+    def _stderr_tail(self) -> str:
+        try:
+            self._stderr.seek(0)
+            lines = [line.strip() for line in self._stderr.read()[-4000:].decode(errors="replace").splitlines()]
+        except (OSError, ValueError):
+            return ""
+        lines = [line for line in lines if line]
+        return lines[-1][:300] if lines else ""
+
+    def cpu_seconds(self) -> float:
+        """CPU time [s] used so far by the controller's process tree (bubblewrap and everything below it)."""
+        total, pending, seen = 0, [self.proc.pid], set()
+        while pending:
+            pid = pending.pop()
+            if pid in seen:
+                continue
+            seen.add(pid)
+            try:
+                fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+                total += int(fields[11]) + int(fields[12])  # utime, stime [clock ticks]
+                for task in Path(f"/proc/{pid}/task").iterdir():
+                    pending += [int(c) for c in (task / "children").read_text().split()]
+            except (OSError, ValueError, IndexError):
+                continue
+        return total / _CLOCK_TICKS
+
+    def _send(self, data: bytes, deadline: _Deadline, context: str) -> None:
+        view = memoryview(data)
+        while view:
+            wait_s = deadline.wait_s()
+            if wait_s <= 0:
+                raise TimeoutError
+            if not self._poll_out.poll(max(1, math.ceil(wait_s * 1000))):
+                continue
+            try:
+                view = view[os.write(self._to_child, view):]
+            except BlockingIOError:
+                continue
+            except (BrokenPipeError, OSError):
+                raise self._died(context) from None
+
+    def _read(self, n: int, deadline: _Deadline, context: str) -> bytes:
+        chunks, got = [], 0
+        while got < n:
+            wait_s = deadline.wait_s()
+            if wait_s <= 0:
+                raise TimeoutError
+            if not self._poll_in.poll(max(1, math.ceil(wait_s * 1000))):
+                continue
+            chunk = os.read(self._from_child, n - got)
+            if not chunk:
+                raise self._died(context)
+            chunks.append(chunk)
+            got += len(chunk)
+        return b"".join(chunks)
+
+    def call(self, kind: bytes, payload: bytes, timeout_s: float, what: str, context: str,
+             cpu_limited: bool = True) -> tuple[bytes, bytes]:
+        """Send one message and wait for the answer; any failure kills the process and is one ControllerError.
+
+        cpu_limited: the answer may cost the controller `timeout_s` of CPU time and take at most
+        `call_wall_timeout_s` of wall time (a loaded machine does not fail an honest controller;
+        a sleeping one is still stopped); otherwise `timeout_s` is wall time (start-up, make_controller).
+        """
+        if self.proc is None:
+            raise ControllerError(f"{self.file}: the controller process has already been stopped")
+        self._calls += 1
+        if cpu_limited and self._calls % CPU_SAMPLE_EVERY_CALLS == 1:
+            self._cpu_sample = self.cpu_seconds()
+        deadline = _Deadline(self, timeout_s if cpu_limited else None,
+                             self.limits.call_wall_timeout_s if cpu_limited else timeout_s)
+        try:
+            self._send(wire.frame(kind, payload), deadline, context)
+            length, answer = wire.HEADER.unpack(self._read(wire.HEADER.size, deadline, context))
+            if length > wire.MAX_MESSAGE_BYTES:
+                raise self._fail(f"the controller sent a {length:,}-byte message (limit {wire.MAX_MESSAGE_BYTES:,})",
+                                 context)
+            body = self._read(length, deadline, context) if length else b""
+        except TimeoutError:
+            limit = f"{timeout_s:g} s of CPU time" if deadline.expired_on_cpu else f"{deadline.wall_s:g} s"
+            raise self._fail(f"{what} took longer than {limit}", context + " (controller process killed)") from None
+        answer = bytes([answer])
+        if answer == wire.ERROR:
+            try:
+                error = json.loads(body)
+                kind, message = one_line(str(error["type"]), 100), one_line(str(error["message"]))
+            except (ValueError, KeyError, TypeError, RecursionError):
+                raise self._fail("sent a malformed error message", context) from None
+            if what == "make_controller":
+                if kind == "ControllerError":  # loading the file failed: that line says it all
+                    raise ControllerError(message)
+                context = "" if context == "during start-up" else context
+            raise ControllerError(f"{self.file}: {what} raised {kind} {context}".rstrip() + (f": {message}" if message else ""))
+        if answer not in (wire.OK, wire.ACTION):
+            raise self._fail(f"sent an unknown message kind {answer!r}", context)
+        return answer, body
+
+    # -- controllers
+    def controller_for(self, task) -> RemoteController:
+        if task.name not in self.built:
+            context = "during start-up" if not self.built else f"for {task.name}"
+            _, body = self.call(wire.MAKE, wire.json_payload({"file": str(self.path), "task": dataclasses.asdict(task)}),
+                                self.limits.make_timeout_s, "make_controller", context, cpu_limited=False)
+            try:
+                info = json.loads(body)
+            except (ValueError, RecursionError):
+                info = None
+            if not isinstance(info, dict):
+                raise self._fail("sent a malformed reply to make_controller", context)
+            try:
+                self.built[task.name] = RemoteController(self, task, info)
+            except (TypeError, ValueError, AttributeError, KeyError, RecursionError):
+                raise self._fail("sent a malformed reply to make_controller (types of its declared attributes)",
+                                 context) from None
+        return self.built[task.name]
+
+    def kill(self) -> None:
+        """Kill the controller's whole process tree (bubblewrap's namespace goes with it) and clean up."""
+        if self.proc is not None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+            try:
+                self.proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                pass
+            self.proc = None
+        for fd in (self._to_child, self._from_child):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self._to_child = self._from_child = -1
+        self._stderr.close()
+        shutil.rmtree(self._tmp, ignore_errors=True)
+
+    def close(self, grace_s: float = 2.0) -> None:
+        """Ask the controller process to quit, give it `grace_s` to exit, then kill whatever is left."""
+        if self.proc is not None:
+            try:
+                os.write(self._to_child, wire.frame(wire.QUIT))
+                self.proc.wait(timeout=grace_s)
+            except (OSError, subprocess.TimeoutExpired):
+                pass
+        self.kill()
+
+
+# ------------------------------------------------------------------ one process per worker
+_PROCESSES: dict[tuple, ControllerProcess] = {}
+_IN_PROCESS: dict[tuple, InProcessController] = {}
+
+
+def controller_for(controller_file: str, task, isolation: str, limits: Limits = DEFAULT_LIMITS,
+                   hidden: tuple[str, ...] = ()):
+    """The controller for `task` in this worker: one sandboxed process per (file content, isolation),
+    reused across tasks and episodes, or an in-process controller for isolation 'none'. `hidden`
+    paths (the run folder, a seed key) are covered up inside the sandbox."""
+    sha = sha256_file(controller_file) if Path(controller_file).is_file() else ""
+    if isolation == "none":
+        key = (str(controller_file), sha, task)
+        if key not in _IN_PROCESS:
+            _IN_PROCESS[key] = InProcessController(controller_file, task, limits)
+        return _IN_PROCESS[key]
+    key = (str(controller_file), sha, isolation, limits, hidden)
+    proc = _PROCESSES.get(key)
+    if proc is None or proc.proc is None:
+        proc = _PROCESSES[key] = ControllerProcess(controller_file, isolation, limits, hidden)
+    try:
+        return proc.controller_for(task)
+    except ControllerError:
+        proc.kill()
+        _PROCESSES.pop(key, None)
+        raise
+
+
+def close_all() -> None:
+    """Stop every controller process of this worker (end of a run, or the worker's exit)."""
+    for proc in list(_PROCESSES.values()):
+        proc.close()
+    _PROCESSES.clear()
+    _IN_PROCESS.clear()
+
+
+def drop(controller_file: str) -> None:
+    """Forget (and stop) this file's controllers: after a failure, nothing of it is reused."""
+    for key in [k for k in _PROCESSES if k[0] == str(controller_file)]:
+        _PROCESSES.pop(key).close()
+    for key in [k for k in _IN_PROCESS if k[0] == str(controller_file)]:
+        _IN_PROCESS.pop(key)
+
+
+__all__ = ["ControllerError", "seccomp_available", "ISOLATIONS", "Limits", "DEFAULT_LIMITS", "ControllerProcess", "RemoteController", "InProcessController",
+           "NotAnArray", "WrongDtype", "controller_for", "close_all", "drop", "resolve_isolation", "isolation_record",
+           "bubblewrap_version"]

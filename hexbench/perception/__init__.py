@@ -1,0 +1,1 @@
+"""What the robot sees: camera views of terrain, the terrain-image dataset and the terrain classifier."""

@@ -1,0 +1,205 @@
+"""`hexbench dataset build terrain-images`: render the ImageFolder tree and its manifest.
+
+Layout of a build directory:
+
+  train/{rough,slopes,stairs}/*.png   80% of the terrain instances of each class
+  test/{rough,slopes,stairs}/*.png    the other 20% (no terrain instance appears in both)
+  manifest.json                       config, camera, and per file: sha256, split, class, instance, pose
+
+Everything is a pure function of the seed: instance k of class c draws its level, colour, terrain
+seed and poses from `np.random.default_rng([seed, c, k])`, and which instances are test instances
+from `np.random.default_rng([seed, c, SPLIT_STREAM])`; the PNG encoder adds no timestamps, so the
+same seed gives byte-identical files. The tree is written into a hidden temporary sibling of the
+output directory and renamed into place only when complete.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import os
+import shutil
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from hexbench.perception.dataset import DATASET_NAME
+from hexbench.perception.views import (
+    LEVEL_RANGES,
+    TERRAIN_CAMERA,
+    TERRAIN_CLASSES,
+    PoseRanges,
+    View,
+    render_view,
+    sample_instance,
+    sample_views,
+)
+
+DATASET_VERSION = "1.0.0"
+MANIFEST_NAME = "manifest.json"
+SPLITS: tuple[str, ...] = ("train", "test")
+SPLIT_STREAM = 1_000_003  # rng stream id for the train/test assignment
+
+
+@dataclass(frozen=True)
+class BuildConfig:
+    per_class: int = 200  # images per terrain class, as in the paper (600 in all)
+    seed: int = 0
+    views_per_instance: int = 5  # camera poses per terrain instance (fewer for tiny builds)
+    test_fraction: float = 0.2
+    poses: PoseRanges = PoseRanges()
+
+    def __post_init__(self) -> None:
+        if self.per_class < 2:
+            raise ValueError(f"--per-class must be at least 2 (one train and one test instance), got {self.per_class}")
+        if self.seed < 0:
+            raise ValueError(f"--seed must be >= 0, got {self.seed}")
+        if not 0.0 < self.test_fraction < 1.0:
+            raise ValueError(f"test fraction must be in (0, 1), got {self.test_fraction}")
+
+    @property
+    def effective_views_per_instance(self) -> int:
+        """Views per instance, reduced for small builds so that there are at least 5 instances per class."""
+        return max(1, min(self.views_per_instance, self.per_class // 5))
+
+    @property
+    def instances_per_class(self) -> int:
+        v = self.effective_views_per_instance
+        return -(-self.per_class // v)
+
+    @property
+    def test_instances_per_class(self) -> int:
+        n = self.instances_per_class
+        return min(n - 1, max(1, round(self.test_fraction * n)))
+
+
+@dataclass(frozen=True)
+class PlannedImage:
+    relpath: str  # posix path inside the build directory
+    split: str
+    terrain: str
+    instance_index: int
+    view_index: int
+    view: View
+
+
+def plan_images(config: BuildConfig) -> list[PlannedImage]:
+    """Every image of the build, in a fixed order, without rendering anything."""
+    planned: list[PlannedImage] = []
+    n_inst, per_view = config.instances_per_class, config.effective_views_per_instance
+    for c, terrain in enumerate(TERRAIN_CLASSES):
+        split_rng = np.random.default_rng([config.seed, c, SPLIT_STREAM])
+        test_ids = set(split_rng.permutation(n_inst)[: config.test_instances_per_class].tolist())
+        remaining = config.per_class
+        for k in range(n_inst):
+            rng = np.random.default_rng([config.seed, c, k])
+            instance = sample_instance(terrain, rng)
+            views = sample_views(instance, min(per_view, remaining), rng, config.poses)
+            remaining -= len(views)
+            split = "test" if k in test_ids else "train"
+            for v, view in enumerate(views):
+                rel = f"{split}/{terrain}/{terrain}_{k:04d}_{v:02d}.png"
+                planned.append(PlannedImage(rel, split, terrain, k, v, view))
+    return planned
+
+
+def png_bytes(image: np.ndarray) -> bytes:
+    """Deterministic PNG encoding (no timestamps or text chunks)."""
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.fromarray(image).save(buf, format="PNG", optimize=False, compress_level=9)
+    return buf.getvalue()
+
+
+def sha256_file(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def build_terrain_images(out_dir: Path, config: BuildConfig = BuildConfig(), *, force: bool = False,
+                         on_image: Callable[[int, int], None] | None = None) -> dict:
+    """Render the dataset into `out_dir` (created atomically) and return its manifest.
+
+    `on_image(done, total)` is called after every image (for progress bars)."""
+    from hexbench.artifacts.provenance import HEXBENCH_VERSION as __version__
+    from hexbench.world.sim import Simulation
+
+    out_dir = Path(out_dir)
+    if out_dir.exists() and any(out_dir.iterdir()) and not force:
+        raise FileExistsError(f"output directory {out_dir} exists and is not empty; pass --force to replace it")
+    out_dir.parent.mkdir(parents=True, exist_ok=True)
+    planned = plan_images(config)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
+    sim = Simulation()
+    try:
+        files = []
+        for i, item in enumerate(planned):
+            data = png_bytes(render_view(sim, item.view))
+            path = tmp / item.relpath
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_bytes(data)
+            files.append({"path": item.relpath, "sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data),
+                          "split": item.split, "label": item.terrain, "instance": item.instance_index,
+                          "view_index": item.view_index, **item.view.record()})
+            if on_image is not None:
+                on_image(i + 1, len(planned))
+        manifest = {
+            "name": DATASET_NAME,
+            "version": DATASET_VERSION,
+            "hexbench_version": __version__,
+            "classes": list(TERRAIN_CLASSES),
+            "level_ranges": {k: list(v) for k, v in LEVEL_RANGES.items()},
+            "config": asdict(config),
+            "camera": asdict(TERRAIN_CAMERA),
+            "counts": {s: {t: sum(1 for f in files if f["split"] == s and f["label"] == t) for t in TERRAIN_CLASSES}
+                       for s in SPLITS},
+            "files": files,
+        }
+        (tmp / MANIFEST_NAME).write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
+        if out_dir.exists():
+            trash = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=out_dir.parent))
+            os.replace(out_dir, trash / out_dir.name)
+            os.replace(tmp, out_dir)
+            shutil.rmtree(trash)
+        else:
+            os.replace(tmp, out_dir)
+        return manifest
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    finally:
+        sim.close()
+
+
+def load_manifest(build_dir: Path) -> dict:
+    path = Path(build_dir) / MANIFEST_NAME
+    if not path.is_file():
+        raise FileNotFoundError(f"{build_dir} is not a terrain-images build: no {MANIFEST_NAME} (run `hexbench dataset build terrain-images`)")
+    return json.loads(path.read_text())
+
+
+def verify_build(build_dir: Path) -> list[str]:
+    """Problems found checking every file against the manifest (empty list: the build is intact)."""
+    build_dir = Path(build_dir)
+    manifest = load_manifest(build_dir)
+    problems = []
+    listed = {f["path"] for f in manifest["files"]}
+    for f in manifest["files"]:
+        path = build_dir / f["path"]
+        if not path.is_file():
+            problems.append(f"missing {f['path']}")
+        elif sha256_file(path) != f["sha256"]:
+            problems.append(f"sha256 mismatch {f['path']}")
+    for path in sorted(build_dir.rglob("*.png")):
+        rel = path.relative_to(build_dir).as_posix()
+        if rel not in listed:
+            problems.append(f"not in manifest {rel}")
+    return problems

@@ -1,0 +1,149 @@
+"""`hexbench dataset download`: fetch a published dataset archive with pooch, verify, extract safely.
+
+The registry is `datasets/registry.toml`, one table per dataset:
+
+  [terrain-images]
+  version = "1.0.0"
+  archive = "terrain-images-1.0.0.tar.gz"
+  sha256 = "<hex digest of the archive>"
+  size_bytes = 1234567
+  urls = ["https://...", "https://..."]   # mirrors, tried in order
+
+Cache: `$HEXBENCH_DATA_DIR` if set, else pooch's per-user cache (`pooch.os_cache("hexbench")`).
+The archive lands there as `<archive>` and is extracted to `<name>-<version>/`; every extracted
+file is then checked against the dataset's own manifest. `$HEXBENCH_DATASET_URL` (or `--url`)
+replaces the registry's mirrors, e.g. to serve the archive from a local server.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from urllib.parse import urlparse
+
+from hexbench.artifacts.provenance import REPO_ROOT
+
+REGISTRY_PATH = REPO_ROOT / "datasets" / "registry.toml"
+DATA_DIR_ENV = "HEXBENCH_DATA_DIR"
+URL_ENV = "HEXBENCH_DATASET_URL"
+COMPLETE_MARKER = ".hexbench-complete"  # holds the archive sha256 once extraction and checks passed
+
+
+class DownloadError(Exception):
+    """A dataset could not be fetched or failed verification (message: one line)."""
+
+
+@dataclass(frozen=True)
+class RegistryEntry:
+    name: str
+    version: str
+    archive: str
+    sha256: str
+    size_bytes: int
+    urls: tuple[str, ...]
+
+    def toml(self) -> str:
+        urls = ", ".join(f'"{u}"' for u in self.urls)
+        return (f"[{self.name}]\nversion = \"{self.version}\"\narchive = \"{self.archive}\"\n"
+                f"sha256 = \"{self.sha256}\"\nsize_bytes = {self.size_bytes}\nurls = [{urls}]\n")
+
+
+def load_registry(path: Path | None = None) -> dict[str, RegistryEntry]:
+    import tomllib
+
+    path = Path(path) if path is not None else REGISTRY_PATH
+    if not path.is_file():
+        raise DownloadError(f"dataset registry {path} not found")
+    try:
+        tables = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as err:
+        raise DownloadError(f"dataset registry {path} is not valid TOML: {err}") from None
+    entries = {}
+    for name, t in tables.items():
+        try:
+            entries[name] = RegistryEntry(name, str(t["version"]), str(t["archive"]), str(t["sha256"]).lower(),
+                                          int(t["size_bytes"]), tuple(t["urls"]))
+        except (KeyError, TypeError, ValueError) as err:
+            raise DownloadError(f"dataset registry {path}: entry [{name}] lacks or mangles {err}") from None
+    return entries
+
+
+def data_dir() -> Path:
+    import pooch
+
+    env = os.environ.get(DATA_DIR_ENV)
+    return Path(env).expanduser() if env else Path(pooch.os_cache("hexbench"))
+
+
+def download(name: str, *, registry_path: Path | None = None, cache_dir: Path | None = None,
+             url: str | None = None, progressbar: bool = False) -> Path:
+    """Fetch, verify and extract dataset `name`; return the folder holding its files."""
+    import pooch
+
+    from hexbench.perception.dataset.archive import ArchiveError, safe_extract
+    from hexbench.perception.dataset.build import verify_build
+
+    registry = load_registry(registry_path)
+    if name not in registry:
+        raise DownloadError(f"unknown dataset {name!r}; registered: {', '.join(sorted(registry)) or '(none)'}")
+    entry = registry[name]
+    cache = Path(cache_dir) if cache_dir is not None else data_dir()
+    cache.mkdir(parents=True, exist_ok=True)
+    target = cache / f"{entry.name}-{entry.version}"
+    marker = target / COMPLETE_MARKER
+    if marker.is_file() and marker.read_text().strip() == entry.sha256:
+        return target
+
+    override = url or os.environ.get(URL_ENV)
+    urls = (override,) if override else entry.urls
+    if not urls:
+        raise DownloadError(f"dataset {name!r} has no mirror URL; pass --url or set {URL_ENV}")
+    failures = []
+    archive = None
+    for u in urls:
+        if urlparse(u).hostname and urlparse(u).hostname.endswith(".invalid"):
+            failures.append(f"{u} is a placeholder (no public mirror yet)")
+            continue
+        try:
+            archive = Path(pooch.retrieve(u, known_hash=f"sha256:{entry.sha256}", fname=entry.archive, path=cache,
+                                          progressbar=progressbar))
+            break
+        except ValueError as err:
+            if "does not match" in str(err):
+                raise DownloadError(f"archive from {u} failed sha256 verification (expected {entry.sha256}): "
+                                    "tampered or truncated; nothing was kept") from None
+            failures.append(f"{u}: {err}")
+        except Exception as err:  # network errors from requests / urllib
+            failures.append(f"{u}: {type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}")
+    if archive is None:
+        raise DownloadError(f"could not download {name!r} from any mirror ({'; '.join(failures)}); "
+                            f"pass --url or set {URL_ENV}, or build it with `hexbench dataset build {name}`")
+    size = archive.stat().st_size
+    if size != entry.size_bytes:
+        raise DownloadError(f"archive {archive.name} is {size} bytes but the registry says {entry.size_bytes}")
+    try:
+        safe_extract(archive, target)
+    except ArchiveError as err:
+        raise DownloadError(str(err)) from None
+    problems = verify_build(target)
+    if problems:
+        raise DownloadError(f"extracted {name!r} does not match its manifest: {problems[0]} "
+                            f"({len(problems)} problem(s))")
+    marker.write_text(entry.sha256 + "\n")
+    return target
+
+
+def registry_entry_for(archive: Path, name: str, version: str, urls: tuple[str, ...]) -> RegistryEntry:
+    from hexbench.perception.dataset.build import sha256_file
+
+    archive = Path(archive)
+    return RegistryEntry(name, version, archive.name, sha256_file(archive), archive.stat().st_size, urls)
+
+
+def write_registry(entries: dict[str, RegistryEntry], path: Path | None = None, header: str = "") -> None:
+    path = Path(path) if path is not None else REGISTRY_PATH
+    text = header + "\n".join(entries[n].toml() for n in sorted(entries))
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)

@@ -1,0 +1,1 @@
+"""Tools that replay a run from its logs: verification, Minari export, .rrd from MCAP."""

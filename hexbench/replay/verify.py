@@ -1,0 +1,148 @@
+"""`hexbench verify RUN_DIR`: replay a run's episodes from their action logs alone and check its record.
+
+The physics is deterministic, so (task, episode seed, actions) gives the episode again without the
+controller that made it. For every episode row (or a random sample of them), the action log must
+hash to the row's sha256 and replay into exactly the row's outcome; the record's per-level and
+per-terrain summaries must follow from its rows, its episodes digest must match them, and the
+seeds must be the protocol's (public seed set) or the key's (keyed set, given the key). The first
+mismatch is named. Leaderboard admission runs the same checks.
+"""
+
+from __future__ import annotations
+
+import json
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from hexbench.artifacts.records import episodes_digest, validate_record
+from hexbench.errors import HexbenchError
+from hexbench.evaluation.episode import first_row_difference, replay_row
+from hexbench.suite.scoring import summarize_levels, summarize_terrains
+from hexbench.suite.seeds import SeedSet
+from hexbench.suite.tasks import format_level, load_suite
+
+
+class VerifyError(HexbenchError):
+    """A run folder cannot be verified (no record, unreadable, wrong schema)."""
+
+
+@dataclass(frozen=True)
+class VerifyReport:
+    ok: bool
+    message: str
+    episodes_replayed: int
+    episodes_total: int
+
+
+def read_run_record(run_dir: Path) -> dict:
+    path = Path(run_dir) / "result.json"
+    if not Path(run_dir).is_dir():
+        raise VerifyError(f"{run_dir}: no such run folder")
+    try:
+        record = json.loads(path.read_text())
+    except OSError as e:
+        raise VerifyError(f"{path}: cannot be read ({e.strerror or e}); is {run_dir} a run folder?") from None
+    except ValueError as e:
+        raise VerifyError(f"{path}: not valid JSON ({e})") from None
+    try:
+        validate_record(record)
+    except Exception as e:  # noqa: BLE001 - jsonschema's ValidationError, one line
+        raise VerifyError(f"{path}: does not follow the result schema ({str(e).splitlines()[0]})") from None
+    return record
+
+
+def _episode_name(row: dict, unit: str) -> str:
+    return f"{row['terrain']} {format_level(row['level'])}{unit} episode {row['index']}"
+
+
+def check_summaries(record: dict) -> str | None:
+    """The first way in which the record's summaries, digest or seeds do not follow from its rows."""
+    rows = record["episodes"]
+    units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
+    headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
+    if any(r["terrain"] not in units or (r["terrain"], r["level"]) not in headroom for r in rows):
+        return "an episode row belongs to no level of the record"
+    levels = summarize_levels(rows, units, headroom)
+    if json.dumps(levels, sort_keys=True) != json.dumps(record["levels"], sort_keys=True):
+        return "the per-level summaries do not follow from the episode rows"
+    if json.dumps(summarize_terrains(levels), sort_keys=True) != json.dumps(record["terrains"], sort_keys=True):
+        return "the per-terrain summaries do not follow from the episode rows"
+    if record.get("episodes_digest") != episodes_digest(rows):
+        return "the episodes digest does not match the episode rows"
+    return None
+
+
+def check_seeds(record: dict, seed_set: SeedSet | None) -> str | None:
+    declared = record["provenance"].get("seed_set", {"kind": "public"})
+    if declared.get("kind") == "keyed":
+        if seed_set is None or seed_set.key is None:
+            return None  # cannot be checked without the key; the caller says so
+        if declared.get("key_fingerprint") != seed_set.fingerprint():
+            return "the record's seed key fingerprint differs from the given key's"
+    else:
+        seed_set = SeedSet()
+    suite = load_suite(record["protocol"])
+    for row in record["episodes"]:
+        task = suite.task(row["terrain"], float(row["level"]))
+        expected = seed_set.seeds(task, row["index"] + 1)[row["index"]]
+        if row["seed"] != expected:
+            return f"{_episode_name(row, task.unit)}: seed {row['seed']} is not the seed set's ({expected})"
+    return None
+
+
+def _replay_one(args: tuple) -> str | None:
+    protocol, row, log_dir = args
+    task = load_suite(protocol).task(row["terrain"], float(row["level"]))
+    try:
+        replayed = replay_row(task, row, Path(log_dir))
+    except HexbenchError as e:
+        return f"{_episode_name(row, task.unit)}: {e}"
+    diff = first_row_difference(row, replayed)
+    return None if diff is None else f"{_episode_name(row, task.unit)}: {diff}"
+
+
+def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random.Generator | None = None,
+               workers: int = 1, seed_set: SeedSet | None = None, progress: bool = False) -> VerifyReport:
+    """Check a run folder's record and replay its episodes (all, or `sample` drawn with `rng`)."""
+    run_dir = Path(run_dir)
+    record = read_run_record(run_dir)
+    rows = record["episodes"]
+    total = len(rows)
+    problem = check_summaries(record) or check_seeds(record, seed_set)
+    if problem:
+        return VerifyReport(False, f"{run_dir}: {problem}", 0, total)
+    chosen = rows
+    if sample is not None and sample < total:
+        rng = rng or np.random.default_rng()
+        chosen = [rows[i] for i in sorted(rng.choice(total, size=sample, replace=False))]
+    jobs = [(record["protocol"], row, str(run_dir / "episodes")) for row in chosen]
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    with Progress(TextColumn("[bold]replaying[/]"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  disable=not progress) as bar:
+        task_bar = bar.add_task("episodes", total=len(jobs))
+        if workers <= 1:
+            results = []
+            for job in jobs:
+                results.append(_replay_one(job))
+                bar.advance(task_bar)
+                if results[-1]:
+                    break
+        else:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+                results = []
+                for result in pool.map(_replay_one, jobs, chunksize=4):
+                    results.append(result)
+                    bar.advance(task_bar)
+    failures = [r for r in results if r]
+    if failures:
+        return VerifyReport(False, f"{run_dir}: {failures[0]}", len(results), total)
+    keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed" and (seed_set is None or seed_set.key is None)
+    note = " (keyed seed set: seeds not checked without --seed-key)" if keyed else ""
+    what = f"{len(chosen)} of {total}" if len(chosen) < total else f"all {total}"
+    return VerifyReport(True, f"{run_dir}: {what} episodes replay exactly from their action logs; summaries and "
+                              f"digest match{note}", len(chosen), total)

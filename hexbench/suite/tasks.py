@@ -1,0 +1,216 @@
+"""The task suite as data: `tasks/protocol_*.toml` -> frozen `TaskSpec`s, and Gymnasium ids.
+
+A task is one (protocol, terrain, level): the terrain family at one difficulty level, with the
+episode rules of its protocol and a fixed list of episode seeds. Seeds are derived
+deterministically: seed_i = first 4 bytes of sha256("hexbench/<protocol>/<terrain>/<level>/<i>")
+as an unsigned integer, so they never depend on run order or on any global state.
+
+Gymnasium ids (registered on `import hexbench`):
+  hexbench/<Terrain>-<level><unit>-<Mode>-v1    every suite level x action mode, protocol rules
+                                                (the mixed course too: hexbench/Mixed-<level>-<Mode>-v1)
+  hexbench/<Terrain>-Curriculum-<Mode>-v1       training curriculum of paper 4.1 (no stall rule)
+  hexbench/Flat-<Mode>-v1                       flat ground, for sanity checks
+with <Mode> one of Joint, CpgResidual, CpgParams.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import sys
+from dataclasses import dataclass, replace
+from functools import lru_cache
+from pathlib import Path
+
+from hexbench.artifacts.provenance import REPO_ROOT
+from hexbench.world.env import ACTION_MODES, CURRICULA, EnvConfig
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+DEFAULT_PROTOCOL = "v1"
+MODE_IDS: dict[str, str] = {"joint": "Joint", "cpg_residual": "CpgResidual", "cpg_params": "CpgParams"}
+PROTOCOL_TERRAINS: tuple[str, ...] = ("rough", "slopes", "stairs")
+
+
+def tasks_dir() -> Path:
+    """Where the suite TOML files live: $HEXBENCH_TASKS_DIR, else the repository's tasks/."""
+    env = os.environ.get("HEXBENCH_TASKS_DIR")
+    return Path(env) if env else REPO_ROOT / "tasks"
+
+
+def format_level(level: float) -> str:
+    """3.0 -> '3', 5.5 -> '5.5' (the spelling used in ids, seeds and tables)."""
+    return f"{float(level):g}"
+
+
+def episode_seed(protocol: str, terrain: str, level: float, index: int) -> int:
+    key = f"hexbench/{protocol}/{terrain}/{format_level(level)}/{index}".encode()
+    return int.from_bytes(hashlib.sha256(key).digest()[:4], "big")
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    """One scored task: a terrain at one level under one protocol. Passed to `make_controller`."""
+
+    protocol: str
+    terrain: str
+    level: float  # paper units
+    unit: str  # "cm" or "deg"
+    headroom: bool  # beyond paper Table 4
+    episodes: int
+    max_steps: int
+    goal_distance_m: float
+    max_lateral_deviation_m: float
+    fall_tilt_deg: float
+    stall_window_s: float
+    stall_min_progress_m: float
+    in_full_run: bool = True  # False: an extra course (mixed) run only when selected by name
+
+    @property
+    def name(self) -> str:
+        return f"{self.terrain}-{format_level(self.level)}{self.unit}"
+
+    def seeds(self, episodes: int | None = None) -> list[int]:
+        n = self.episodes if episodes is None else episodes
+        return [episode_seed(self.protocol, self.terrain, self.level, i) for i in range(n)]
+
+    def env_config(self, action_mode: str, **overrides) -> EnvConfig:
+        return EnvConfig(
+            terrain=self.terrain, level=self.level, action_mode=action_mode, max_steps=self.max_steps,
+            goal_distance_m=self.goal_distance_m, max_lateral_deviation_m=self.max_lateral_deviation_m,
+            fall_tilt_deg=self.fall_tilt_deg, stall_window_s=self.stall_window_s,
+            stall_min_progress_m=self.stall_min_progress_m, **overrides,
+        )
+
+    def gym_id(self, action_mode: str) -> str:
+        return f"hexbench/{self.terrain.capitalize()}-{format_level(self.level)}{self.unit}-{MODE_IDS[action_mode]}-{self.protocol}"
+
+
+@dataclass(frozen=True)
+class Suite:
+    """A protocol's tasks: `tasks` make the full run (what records and the leaderboard score);
+    `extra_tasks` are courses outside it (the mixed course), run only when selected by name."""
+
+    protocol: str
+    tasks: tuple[TaskSpec, ...]
+    extra_tasks: tuple[TaskSpec, ...] = ()
+
+    @property
+    def all_tasks(self) -> tuple[TaskSpec, ...]:
+        return self.tasks + self.extra_tasks
+
+    @property
+    def terrains(self) -> tuple[str, ...]:
+        """The terrains of the full run."""
+        return tuple(dict.fromkeys(t.terrain for t in self.tasks))
+
+    @property
+    def extra_terrains(self) -> tuple[str, ...]:
+        return tuple(dict.fromkeys(t.terrain for t in self.extra_tasks))
+
+    @property
+    def all_terrains(self) -> tuple[str, ...]:
+        return self.terrains + self.extra_terrains
+
+    def levels(self, terrain: str, include_headroom: bool = True) -> list[float]:
+        return [t.level for t in self.all_tasks if t.terrain == terrain and (include_headroom or not t.headroom)]
+
+    def task(self, terrain: str, level: float) -> TaskSpec:
+        if terrain not in self.all_terrains:
+            raise ValueError(f"unknown terrain {terrain!r}; valid terrains: {', '.join(self.all_terrains)}")
+        for t in self.all_tasks:
+            if t.terrain == terrain and abs(t.level - float(level)) < 1e-9:
+                return t
+        valid = ", ".join(format_level(v) for v in self.levels(terrain))
+        raise ValueError(f"unknown {terrain} level {format_level(level)}; valid levels: {valid}")
+
+    def task_between(self, terrain: str, level: float) -> TaskSpec:
+        """A diagnostic task at any level up to the terrain's top, e.g. slopes 19.5 deg: a suite level's
+        own task, else the next suite level up with this level (its rules, seeds derived from this level).
+        Never scored; for probing thresholds between suite levels (bench/compare_checkpoints.py)."""
+        try:
+            return self.task(terrain, level)
+        except ValueError as e:
+            above = [t for t in self.all_tasks if t.terrain == terrain and t.level > float(level)]
+            if not above:
+                raise ValueError(f"{e} (or any level below the top)") from None
+            return replace(min(above, key=lambda t: t.level), level=float(level))
+
+    def select(self, terrains: list[str] | None = None, levels: list[float] | None = None) -> list[TaskSpec]:
+        """Tasks of the given terrains (default: the full run's) and levels (default all of each terrain).
+
+        Raises ValueError naming the valid choices for an unknown terrain or a level that no
+        selected terrain has.
+        """
+        chosen_terrains = list(terrains) if terrains else list(self.terrains)
+        for t in chosen_terrains:
+            if t not in self.all_terrains:
+                raise ValueError(f"unknown terrain {t!r}; valid terrains: {', '.join(self.all_terrains)}")
+        out = [t for t in self.all_tasks if t.terrain in chosen_terrains]
+        if levels:
+            for lv in levels:
+                if not any(abs(t.level - lv) < 1e-9 for t in out):
+                    valid = "; ".join(f"{ter}: {', '.join(format_level(v) for v in self.levels(ter))}"
+                                      for ter in chosen_terrains)
+                    raise ValueError(f"unknown level {format_level(lv)}; valid levels: {valid}")
+            out = [t for t in out if any(abs(t.level - lv) < 1e-9 for lv in levels)]
+        return out
+
+
+@lru_cache(maxsize=8)
+def load_suite(protocol: str = DEFAULT_PROTOCOL) -> Suite:
+    path = tasks_dir() / f"protocol_{protocol}.toml"
+    if not path.exists():
+        known = sorted(p.stem.removeprefix("protocol_") for p in tasks_dir().glob("protocol_*.toml"))
+        raise ValueError(f"unknown protocol {protocol!r}; valid protocols: {', '.join(known) or 'none found'}")
+    data = tomllib.loads(path.read_text())
+    if data.get("protocol") != protocol:
+        raise ValueError(f"{path} declares protocol {data.get('protocol')!r}, expected {protocol!r}")
+    tasks = []
+    for terrain, spec in data["terrains"].items():
+        for headroom, key in ((False, "levels"), (True, "headroom_levels")):
+            for level in spec.get(key, []):
+                tasks.append(TaskSpec(
+                    protocol=protocol, terrain=terrain, level=float(level), unit=spec["unit"], headroom=headroom,
+                    episodes=int(data["episodes_per_level"]), max_steps=int(spec.get("max_steps", data["max_steps"])),
+                    goal_distance_m=float(spec.get("goal_distance_m", data["goal_distance_m"])),
+                    max_lateral_deviation_m=float(data["max_lateral_deviation_m"]),
+                    fall_tilt_deg=float(data["fall_tilt_deg"]), stall_window_s=float(data["stall_window_s"]),
+                    stall_min_progress_m=float(data["stall_min_progress_m"]),
+                    in_full_run=bool(spec.get("in_full_run", True)),
+                ))
+    return Suite(protocol, tuple(t for t in tasks if t.in_full_run), tuple(t for t in tasks if not t.in_full_run))
+
+
+def curriculum_config(terrain: str, action_mode: str, **overrides) -> EnvConfig:
+    """The training environment of paper 4.1 for a terrain (curriculum, noise, no stall rule)."""
+    return EnvConfig(terrain=terrain, action_mode=action_mode, curriculum=CURRICULA[terrain], **overrides)
+
+
+def registered_ids() -> list[str]:
+    import gymnasium as gym
+
+    return sorted(i for i in gym.registry if i.startswith("hexbench/"))
+
+
+def register_envs(protocol: str = DEFAULT_PROTOCOL) -> None:
+    """Register every suite task x action mode, the curricula and flat ground with Gymnasium."""
+    import gymnasium as gym
+
+    entry = "hexbench.world.env:HexapodEnv"
+    for mode in ACTION_MODES:
+        m = MODE_IDS[mode]
+        for task in load_suite(protocol).all_tasks:
+            gid = task.gym_id(mode)
+            if gid not in gym.registry:
+                gym.register(gid, entry_point=entry, kwargs={"config": task.env_config(mode)})
+        for terrain in CURRICULA:
+            gid = f"hexbench/{terrain.capitalize()}-Curriculum-{m}-{protocol}"
+            if gid not in gym.registry:
+                gym.register(gid, entry_point=entry, kwargs={"config": curriculum_config(terrain, mode)})
+        gid = f"hexbench/Flat-{m}-{protocol}"
+        if gid not in gym.registry:
+            gym.register(gid, entry_point=entry, kwargs={"config": EnvConfig(terrain="flat", action_mode=mode)})

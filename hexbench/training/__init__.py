@@ -1,0 +1,1 @@
+"""Training the baselines: the loop, checkpoint selection and publishing, learning curves, the epsilon sweep."""
