@@ -2,8 +2,18 @@
 
 import numpy as np
 
-from hexbench.agents.policy import BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController, waypoint_horizon_m
+import json
+from pathlib import Path
+
+import pytest
+
+from hexbench.agents.policy import (BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController, deterministic_action,
+                                    load_policy, scale_observation, waypoint_horizon_m)
+from hexbench.suite.controller import load_controller_module
 from hexbench.suite.tasks import load_suite
+
+REPO = Path(__file__).resolve().parent.parent
+SHIPPED = json.loads((REPO / "baselines" / "checkpoints" / "manifest.json").read_text())["checkpoints"]
 
 
 class RecordingPolicy:
@@ -40,3 +50,15 @@ def test_waypoint_only_on_courses_longer_than_training():
     assert waypoint_horizon_m(suite.task("rough", 3.0).goal_distance_m) is None  # the 2.5 m goal itself
     mixed = [t for t in suite.extra_tasks if t.terrain == "mixed"][0]
     assert mixed.goal_distance_m > 2.5 and waypoint_horizon_m(mixed.goal_distance_m) == 2.5
+
+
+@pytest.mark.parametrize("key", sorted(SHIPPED))
+def test_the_fast_deterministic_action_is_bit_for_bit_sb3_predict_on_every_shipped_checkpoint(key):
+    entry = SHIPPED[key]
+    config = load_controller_module(REPO / "baselines" / f"{entry['method']}.py").CONFIG
+    policy = load_policy(config, REPO / "baselines" / "checkpoints" / entry["file"], entry["sha256"])
+    for obs in np.random.default_rng(0).normal(0.0, 2.0, size=(40, 62)).astype(np.float32):
+        scaled = scale_observation(obs)
+        expected, _ = policy.predict(scaled, deterministic=True)
+        got = deterministic_action(policy, scaled)
+        assert got.dtype == expected.dtype and np.array_equal(got, expected)

