@@ -103,6 +103,7 @@ def test_record_is_schema_valid_and_counts_add_up(tmp_path):
     assert rec["controller"]["sha256"] and rec["provenance"]["git_commit"]
     machine = rec["provenance"]["machine"]  # what a policy's numbers can depend on across machines
     assert machine["cpu_model"] and machine["packages"]["pybullet"] and "torch" in machine["packages"]
+    assert rec["provenance"]["engine"] == {"name": "local", "description": "local process pool"}
     saved = json.loads((tmp_path / "out" / "result.json").read_text())
     assert saved["episodes"] == rec["episodes"]
     import pandas as pd

@@ -213,6 +213,8 @@ def _same_record(local: Path, ray: Path) -> None:
     a, b = (json.loads((p / "result.json").read_text()) for p in (local, ray))
     assert b["episodes"] == a["episodes"]
     assert b["episodes_digest"] == a["episodes_digest"]
+    assert a["provenance"]["engine"]["name"] == "local" and b["provenance"]["engine"]["name"] == "ray"
+    assert "Ray cluster (2 nodes" in b["provenance"]["engine"]["description"]
     import pandas as pd
 
     from hexbench.artifacts.files import sha256_file

@@ -32,8 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.artifacts.files import sha256_file
+from hexbench.artifacts.files import atomic_path, sha256_file
 from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
+from hexbench.errors import HexbenchError
 from hexbench.world.env import ACTION_MODES, OBS_DIM
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
@@ -52,7 +53,7 @@ OBS_SCALE = np.concatenate([
 assert OBS_SCALE.shape == (OBS_DIM,)
 
 
-class ConfigError(ValueError):
+class ConfigError(HexbenchError, ValueError):
     """A baseline file's CONFIG is missing or invalid; the message is one line."""
 
 
@@ -162,10 +163,8 @@ def save_policy_weights(policy_state: dict, path: Path) -> str:
     """Write a policy-only SB3 zip (no pickled data) atomically; returns its sha256."""
     from stable_baselines3.common.save_util import save_to_zip_file
 
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp.zip")
-    save_to_zip_file(tmp, data=None, params={"policy": policy_state})
-    tmp.replace(path)
+    with atomic_path(path) as tmp:
+        save_to_zip_file(tmp, data=None, params={"policy": policy_state})
     return sha256_file(path)
 
 

@@ -31,7 +31,7 @@ def git_commit(repo: Path | None = None) -> str:
 
 
 # Packages whose arithmetic an episode's outcome depends on. The physics reproduces bit for bit on
-# another x86 machine, a policy's float32 forward pass need not (docs/training.md, session 11).
+# another x86 machine; a policy's float32 forward pass need not, so records name these versions.
 OUTCOME_PACKAGES: tuple[str, ...] = ("numpy", "pybullet", "torch")
 
 

@@ -46,6 +46,7 @@ def register(app: typer.Typer) -> None:
 
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn
 
+        from hexbench.artifacts.files import sha256_file
         from hexbench.perception.classifier import (
             DEFAULT_CHECKPOINT,
             TrainConfig,
@@ -55,7 +56,7 @@ def register(app: typer.Typer) -> None:
             save_checkpoint,
             train,
         )
-        from hexbench.perception.dataset.build import MANIFEST_NAME, sha256_file
+        from hexbench.perception.dataset.build import MANIFEST_NAME
 
         out = out or DEFAULT_CHECKPOINT
         try:

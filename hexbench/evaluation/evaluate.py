@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hexbench.artifacts.files import make_folder, os_reason, sha256_file, write_text_atomic
+from hexbench.artifacts.files import atomic_path, make_folder, os_reason, sha256_file, write_text_atomic
 from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit, machine_info
 from hexbench.artifacts.records import episode_record_rows, episodes_digest, validate_record
 from hexbench.errors import HexbenchError, OutputError
@@ -40,7 +40,8 @@ from hexbench.suite.tasks import TaskSpec
 
 def build_record(*, label: str, controller_file: str, action_mode: str, tasks: list[TaskSpec], rows: list[dict],
                  started_at: str, wall_time_s: float, workers: int, command: str, checkpoints: list[dict],
-                 commit: str, isolation: dict | None = None, seed_set: dict | None = None) -> dict:
+                 commit: str, isolation: dict | None = None, seed_set: dict | None = None,
+                 engine: dict | None = None) -> dict:
     units = {t.terrain: t.unit for t in tasks}
     headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     episodes = episode_record_rows(rows)
@@ -55,7 +56,8 @@ def build_record(*, label: str, controller_file: str, action_mode: str, tasks: l
         "provenance": {"hexbench_version": HEXBENCH_VERSION, "git_commit": commit, "command": command,
                        "machine": machine_info(), "started_at": started_at, "wall_time_s": wall_time_s,
                        "workers": workers, "isolation": isolation or {"mode": "unknown", "sandboxed": False},
-                       "seed_set": seed_set or {"kind": "public"}},
+                       "seed_set": seed_set or {"kind": "public"},
+                       "engine": engine or {"name": "local", "description": "local process pool"}},
         "levels": levels,
         "terrains": summarize_terrains(levels),
         "episodes": episodes,
@@ -267,33 +269,29 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
         done[job.episode_id] = row
         timing[job.episode_id] = (journal.invocation, started_at, elapsed_s)
 
-    _play_all(todo, len(jobs), workers, label, progress, finished)
+    engine = engines.current() or engines.LocalEngine()
+    _play_all(engine, todo, len(jobs), workers, label, progress, finished)
     rows = [done[j.episode_id] for j in jobs]
     run_started_at, wall_time_s = run_time([*timing.values(), (journal.invocation, started_at,
                                                                time.perf_counter() - journal.t0)])
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
                        started_at=run_started_at, wall_time_s=wall_time_s, workers=workers, command=command,
                        checkpoints=checkpoints, commit=commit, isolation=sandbox.isolation_record(mode, limits, controller_file),
-                       seed_set=seed_set.record())
+                       seed_set=seed_set.record(), engine={"name": engine.name, "description": engine.describe()})
     import pandas as pd
 
     ordered = sorted(jobs, key=lambda j: (j.task.terrain, j.task.level, j.index))
     table = pd.DataFrame([{"episode_id": j.episode_id, **done[j.episode_id]} for j in ordered])
-    tmp = out / f".episodes.parquet.{os.getpid()}.tmp"
-    try:
+    with atomic_path(out / "episodes.parquet") as tmp:
         table.to_parquet(tmp, index=False)
-        os.replace(tmp, out / "episodes.parquet")
-    except OSError as e:
-        tmp.unlink(missing_ok=True)
-        raise OutputError(f"{out / 'episodes.parquet'}: cannot be written ({os_reason(e)})") from None
     write_text_atomic(out / "result.json", json.dumps(rec, indent=1, sort_keys=False) + "\n")
     return RunResult(rec, out)
 
 
-def _play_all(todo: list[EpisodeJob], total: int, workers: int, label: str, progress: bool, finished) -> None:
-    """Play every job on the engine chosen with `hexbench.evaluation.engines.using` (default: the
-    local pool of `workers` pinned processes), calling `finished(job, row)` as each ends; the first
-    ControllerError stops the rest and propagates."""
+def _play_all(engine, todo: list[EpisodeJob], total: int, workers: int, label: str, progress: bool, finished) -> None:
+    """Play every job on `engine` (the one chosen with `hexbench.evaluation.engines.using`, else
+    the local pool of `workers` pinned processes), with a progress bar, calling `finished(job, row)`
+    as each ends; the first ControllerError stops the rest and propagates."""
     from rich.progress import (
         BarColumn,
         MofNCompleteColumn,
@@ -303,7 +301,6 @@ def _play_all(todo: list[EpisodeJob], total: int, workers: int, label: str, prog
         TimeRemainingColumn,
     )
 
-    engine = engines.current() or engines.LocalEngine()
     with Progress(TextColumn(f"[bold]{label}[/]"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   TimeRemainingColumn(), disable=not progress, transient=False) as bar:
         task_bar = bar.add_task("episodes", total=total, completed=total - len(todo))

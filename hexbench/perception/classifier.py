@@ -12,7 +12,6 @@ before unpickling anything.
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,7 +21,9 @@ import numpy as np
 import torch
 from torch import nn
 
+from hexbench.artifacts.files import sha256_bytes, sha256_file, write_bytes_atomic
 from hexbench.artifacts.provenance import REPO_ROOT
+from hexbench.errors import HexbenchError
 from hexbench.perception.views import TERRAIN_CLASSES
 
 IMAGE_HEIGHT_PX, IMAGE_WIDTH_PX = 72, 96
@@ -235,12 +236,8 @@ def plot_confusion(report: dict, path: Path, title: str) -> Path:
 # ---------------------------------------------------------------------------------------- checkpoints
 
 
-class ChecksumError(Exception):
+class ChecksumError(HexbenchError):
     """A checkpoint whose sha256 differs from the one recorded for it."""
-
-
-def sha256_of(path: Path) -> str:
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def sidecar_path(checkpoint: Path) -> Path:
@@ -250,7 +247,6 @@ def sidecar_path(checkpoint: Path) -> Path:
 def save_checkpoint(model: LeNetAttention, path: Path, provenance: dict) -> dict:
     """Write weights to `path` and `<path>.json` with their sha256 and `provenance`; return the sidecar."""
     import io
-    import os
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -259,10 +255,8 @@ def save_checkpoint(model: LeNetAttention, path: Path, provenance: dict) -> dict
     buf = io.BytesIO()
     torch.save(payload, buf)
     data = buf.getvalue()
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
-    sidecar = {"file": path.name, "sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data),
+    write_bytes_atomic(path, data)
+    sidecar = {"file": path.name, "sha256": sha256_bytes(data), "bytes": len(data),
                "architecture": "LeNetAttention", "classes": list(TERRAIN_CLASSES),
                "input": f"{IMAGE_HEIGHT_PX}x{IMAGE_WIDTH_PX} RGB", **provenance}
     sidecar_path(path).write_text(json.dumps(sidecar, indent=2) + "\n")
@@ -279,7 +273,7 @@ def load_classifier(path: Path, expected_sha256: str | None = None) -> LeNetAtte
         if not side.is_file():
             raise ChecksumError(f"{path}: no sidecar {side.name} with its sha256; refusing to load unverified weights")
         expected_sha256 = json.loads(side.read_text())["sha256"]
-    actual = sha256_of(path)
+    actual = sha256_file(path)
     if actual != expected_sha256:
         raise ChecksumError(f"{path}: sha256 {actual} does not match the recorded {expected_sha256}; refusing to load")
     payload = torch.load(path, map_location="cpu", weights_only=True)

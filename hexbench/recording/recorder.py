@@ -10,7 +10,6 @@ not a power cut.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import os
 import re
@@ -18,6 +17,7 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
+from hexbench.artifacts.files import sha256_bytes, sha256_file
 from hexbench.recording.capture import EpisodeCapture
 from hexbench.recording.kinematics import joint_frames
 from hexbench.recording.mcap_episode import McapPrecision, write_episode_mcap
@@ -110,14 +110,14 @@ class EpisodeRecorder:
             tmp_mcap = self._tmp(self.mcap_path)
             self._tmp_paths.append(tmp_mcap)
             tmp_mcap.write_bytes(mcap_bytes)
-            files = {"mcap_path": self.mcap_path.name, "mcap_sha256": hashlib.sha256(mcap_bytes).hexdigest()}
+            files = {"mcap_path": self.mcap_path.name, "mcap_sha256": sha256_bytes(mcap_bytes)}
             if self.config.write_rrd:
                 tmp_rrd = self._tmp(self.rrd_path)
                 self._tmp_paths.append(tmp_rrd)
                 write_episode_rrd(tmp_rrd, ep, recording_id=self.episode_id, urdf=st["urdf"], joints=st["joints"],
                                   mesh=st["mesh"], goal_x_m=st["goal_distance_m"], settings=self.config.rerun)
                 files.update({"rrd_path": self.rrd_path.name,
-                              "rrd_sha256": hashlib.sha256(tmp_rrd.read_bytes()).hexdigest()})
+                              "rrd_sha256": sha256_file(tmp_rrd)})
                 os.replace(tmp_rrd, self.rrd_path)
             os.replace(tmp_mcap, self.mcap_path)
             self._tmp_paths.clear()

@@ -19,8 +19,10 @@ import tempfile
 import zlib
 from pathlib import Path, PurePosixPath
 
+from hexbench.errors import HexbenchError
 
-class ArchiveError(Exception):
+
+class ArchiveError(HexbenchError):
     """An archive that is damaged or unsafe to extract (message: one line naming the problem)."""
 
 

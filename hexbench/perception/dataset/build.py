@@ -15,7 +15,6 @@ output directory and renamed into place only when complete.
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import os
@@ -27,6 +26,7 @@ from typing import Callable
 
 import numpy as np
 
+from hexbench.artifacts.files import sha256_bytes, sha256_file
 from hexbench.perception.dataset import DATASET_NAME
 from hexbench.perception.views import (
     LEVEL_RANGES,
@@ -116,14 +116,6 @@ def png_bytes(image: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for chunk in iter(lambda: f.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def build_terrain_images(out_dir: Path, config: BuildConfig = BuildConfig(), *, force: bool = False,
                          on_image: Callable[[int, int], None] | None = None) -> dict:
     """Render the dataset into `out_dir` (created atomically) and return its manifest.
@@ -146,7 +138,7 @@ def build_terrain_images(out_dir: Path, config: BuildConfig = BuildConfig(), *, 
             path = tmp / item.relpath
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_bytes(data)
-            files.append({"path": item.relpath, "sha256": hashlib.sha256(data).hexdigest(), "bytes": len(data),
+            files.append({"path": item.relpath, "sha256": sha256_bytes(data), "bytes": len(data),
                           "split": item.split, "label": item.terrain, "instance": item.instance_index,
                           "view_index": item.view_index, **item.view.record()})
             if on_image is not None:

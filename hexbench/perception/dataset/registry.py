@@ -22,7 +22,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlparse
 
+from hexbench.artifacts.files import sha256_file, write_text_atomic
 from hexbench.artifacts.provenance import REPO_ROOT
+from hexbench.errors import HexbenchError
 
 REGISTRY_PATH = REPO_ROOT / "datasets" / "registry.toml"
 DATA_DIR_ENV = "HEXBENCH_DATA_DIR"
@@ -30,7 +32,7 @@ URL_ENV = "HEXBENCH_DATASET_URL"
 COMPLETE_MARKER = ".hexbench-complete"  # holds the archive sha256 once extraction and checks passed
 
 
-class DownloadError(Exception):
+class DownloadError(HexbenchError):
     """A dataset could not be fetched or failed verification (message: one line)."""
 
 
@@ -135,7 +137,6 @@ def download(name: str, *, registry_path: Path | None = None, cache_dir: Path | 
 
 
 def registry_entry_for(archive: Path, name: str, version: str, urls: tuple[str, ...]) -> RegistryEntry:
-    from hexbench.perception.dataset.build import sha256_file
 
     archive = Path(archive)
     return RegistryEntry(name, version, archive.name, sha256_file(archive), archive.stat().st_size, urls)
@@ -144,6 +145,4 @@ def registry_entry_for(archive: Path, name: str, version: str, urls: tuple[str, 
 def write_registry(entries: dict[str, RegistryEntry], path: Path | None = None, header: str = "") -> None:
     path = Path(path) if path is not None else REGISTRY_PATH
     text = header + "\n".join(entries[n].toml() for n in sorted(entries))
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
+    write_text_atomic(path, text)
