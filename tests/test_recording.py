@@ -386,22 +386,48 @@ def test_joint_states_template_encoding_matches_protobuf():
         assert [j.name for j in msg.joints] == list(JOINT_NAMES)
 
 
-def test_export_minari_replays_logged_episodes(tmp_path):
+def test_export_minari_replays_logged_episodes(tmp_path, monkeypatch):
     minari = pytest.importorskip("minari")
+    from dataclasses import replace
+
     run = tmp_path / "cpg-run"
     task = load_suite("v1").task("stairs", 2.0)
     for index, seed in enumerate(task.seeds(2)):
-        run_episode(EpisodeJob(CPG, task, index, seed, record_dir=str(run / "episodes"), max_steps=30))
+        run_episode(EpisodeJob(CPG, task, index, seed, record_dir=str(run / "episodes"), log_dir=str(run / "episodes"),
+                               max_steps=30))
     res = CliRunner().invoke(app, ["export", "minari", str(run)])
     assert res.exit_code == 0, res.output
-    os.environ["MINARI_DATASETS_PATH"] = str(run / "minari")
+    assert "wrote Minari dataset hexbench/cpg-run-stairs-2cm-v0 (2 episodes, 60 steps)" in res.output
+    assert "ds = minari.load_dataset('hexbench/cpg-run-stairs-2cm-v0'); env = ds.recover_environment()" in res.output
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(run / "minari"))
+    ds = minari.load_dataset("hexbench/cpg-run-stairs-2cm-v0")
+    assert ds.total_episodes == 2 and ds.total_steps == 60
+    first = next(ds.iterate_episodes())
+    assert first.observations.shape == (31, 62) and first.actions.shape == (30, 18)
+    env = ds.recover_environment()  # the environment the episodes were played in, step limit included
     try:
-        ds = minari.load_dataset("hexbench/cpg-run-stairs-2cm-v0")
-        assert ds.total_episodes == 2 and ds.total_steps == 60
-        first = next(ds.iterate_episodes())
-        assert first.observations.shape == (31, 62) and first.actions.shape == (30, 18)
+        assert env.unwrapped.config == replace(task.env_config("cpg_residual"), max_steps=30)
+        obs, _ = env.reset(seed=task.seeds(2)[first.id])
+        assert np.array_equal(obs, first.observations[0])
+        for action in first.actions:
+            obs, _, terminated, truncated, _ = env.step(action)
+        assert truncated and np.array_equal(obs, first.observations[-1])
     finally:
-        os.environ.pop("MINARI_DATASETS_PATH", None)
+        env.close()
+
+
+def test_export_minari_refuses_a_bad_dataset_id_and_writes_nothing(tmp_path):
+    pytest.importorskip("minari")
+    run = tmp_path / "run"
+    task = load_suite("v1").task("stairs", 2.0)
+    run_episode(EpisodeJob(CPG, task, 0, task.seeds(1)[0], record_dir=str(run / "episodes"),
+                           log_dir=str(run / "episodes"), max_steps=10))
+    res = CliRunner().invoke(app, ["export", "minari", str(run), "--dataset-id", "my dataset"])
+    assert res.exit_code == 2
+    expected = ("error: --dataset-id 'my dataset' is not a Minari dataset id; use [namespace/]name-v<version> "
+                "(letters, digits, - and _), e.g. hexbench/cpg-rough-v0")
+    assert res.output.strip().splitlines() == [expected]
+    assert not (run / "minari").exists()
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc")

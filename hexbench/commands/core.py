@@ -10,14 +10,23 @@ def register(app: typer.Typer) -> None:
 
     @app.command("list")
     def list_tasks(protocol: str = typer.Option("v1", help="protocol version"),
-                   ids: bool = typer.Option(False, "--ids", help="print every Gymnasium id")) -> None:
+                   ids: bool = typer.Option(False, "--ids", help="print only the Gymnasium ids, one per line")) -> None:
         """List terrains, levels and Gymnasium task ids."""
+        from hexbench.suite.tasks import format_level, load_suite, registered_ids
+
+        try:
+            suite = load_suite(protocol)
+        except ValueError as e:
+            typer.echo(f"error: {e}", err=True)
+            raise typer.Exit(2)
+        protocol_ids = [gid for gid in registered_ids() if gid.endswith(f"-{protocol}")]  # registered on import
+        if ids:
+            for gid in protocol_ids:
+                typer.echo(gid)
+            return
         from rich.console import Console
         from rich.table import Table
 
-        from hexbench.suite.tasks import format_level, load_suite, registered_ids
-
-        suite = load_suite(protocol)
         table = Table(title=f"hexbench protocol {protocol}")
         for col in ("terrain", "unit", "paper levels (Table 4)", "headroom levels"):
             table.add_column(col)
@@ -29,13 +38,8 @@ def register(app: typer.Typer) -> None:
                           ", ".join(format_level(t.level) for t in tasks if t.headroom))
         console = Console()
         console.print(table)
-        all_ids = registered_ids()
-        if ids:
-            for gid in all_ids:
-                console.print(gid, highlight=False, soft_wrap=True)
-        else:
-            console.print(f"{len(all_ids)} Gymnasium ids registered (--ids lists them), e.g. "
-                          f"{load_suite(protocol).tasks[0].gym_id('cpg_residual')}", highlight=False, soft_wrap=True)
+        console.print(f"{len(protocol_ids)} Gymnasium ids registered (--ids lists them), e.g. "
+                      f"{suite.tasks[0].gym_id('cpg_residual')}", highlight=False, soft_wrap=True)
 
 
 def _parse_levels(text: str | None) -> list[float] | None:
@@ -44,7 +48,8 @@ def _parse_levels(text: str | None) -> list[float] | None:
     try:
         return [float(v) for v in text.replace(" ", "").split(",") if v]
     except ValueError:
-        raise typer.BadParameter(f"--levels must be comma-separated numbers in the paper's units, got {text!r}")
+        raise ValueError(f"--levels must be comma-separated numbers in the paper's units (cm, deg), got {text!r}") \
+            from None
 
 
 def print_success_table(record: dict, console) -> None:
@@ -73,9 +78,36 @@ def print_success_table(record: dict, console) -> None:
         hardest = terrain["hardest_level_passed"]
         console.print(f"  hardest level passed (>= 80%): "
                       f"{format_level(hardest) + ' ' + terrain['unit'] if hardest is not None else 'none'}; "
-                      f"AUC over paper levels {terrain['auc']:.3f}"
+                      f"{auc_text(record, terrain)}"
                       + (f"; headroom AUC {terrain['headroom_auc']:.3f}" if terrain.get("headroom_auc") is not None else "")
-                      + "  (* = headroom level beyond paper Table 4)", highlight=False)
+                      + "  (* = headroom level beyond paper Table 4)", highlight=False, soft_wrap=True)
+
+
+def auc_text(record: dict, terrain: dict) -> str:
+    """A terrain's AUC for the run summary. The AUC is the terrain's only when the run covers all of
+    the protocol's paper levels; over fewer it is labelled partial, naming how many it covers."""
+    from hexbench.suite.tasks import format_level, load_suite
+
+    name = terrain["terrain"]
+    run_levels = [lv for lv in record["levels"] if lv["terrain"] == name and not lv["headroom"]]
+    try:
+        protocol_tasks = [t for t in load_suite(record["protocol"]).all_tasks if t.terrain == name]
+    except ValueError:  # a protocol this install does not have: the run's own levels are all it knows
+        protocol_tasks = []
+    paper = {format_level(t.level) for t in protocol_tasks if not t.headroom}
+    covered = {format_level(lv["level"]) for lv in run_levels}
+    if terrain.get("auc") is None or not run_levels:
+        return f"no AUC (none of the {len(paper)} paper levels run)" if paper else "no AUC (no paper level run)"
+    auc = f"{terrain['auc']:.3f}"
+    if not paper:
+        return f"AUC over the {len(covered)} paper level(s) run {auc}"
+    if not paper <= covered:
+        return f"partial AUC {auc} (over {len(covered & paper)} of {len(paper)} paper levels; not the terrain's AUC)"
+    per_level = protocol_tasks[0].episodes
+    fewest = min(lv["episodes"] for lv in run_levels)
+    if fewest < per_level:
+        return f"AUC over paper levels {auc} (from {fewest} episode(s) per level; the protocol runs {per_level})"
+    return f"AUC over paper levels {auc}"
 
 
 ISOLATION_HELP = ("controller isolation: auto (bubblewrap where it works, else process), bubblewrap, process, "
@@ -101,7 +133,8 @@ def _register_run(app: typer.Typer) -> None:
     def run(
         files: list[str] = typer.Argument(..., help="controller file(s) defining make_controller(task)"),
         terrain: list[str] = typer.Option(None, "--terrain", help="rough, slopes or stairs (repeatable; default all)"),
-        levels: str = typer.Option(None, "--levels", help="comma-separated levels in the paper's units (cm, deg)"),
+        levels: str = typer.Option(None, "--levels", "--level", help="comma-separated levels in the paper's units "
+                                   "(cm, deg)"),
         episodes: int = typer.Option(None, "--episodes", min=1, help="episodes per level (default: protocol's 20)"),
         workers: int = typer.Option(0, "--workers", min=0, help="worker processes (0: all cores)"),
         out: str = typer.Option(None, "--out", help="output directory (default runs/<name>-<protocol>)"),

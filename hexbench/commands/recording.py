@@ -26,6 +26,33 @@ def _episode_file(episode: str, suffix: str) -> Path:
     return p
 
 
+def find_controller(recorded: str) -> Path | None:
+    """The controller file a record names: its path as recorded (absolute, or relative to the current
+    folder), else relative to the repository; None where there is no such file."""
+    from hexbench.artifacts.provenance import REPO_ROOT
+
+    p = Path(recorded)
+    for candidate in (p,) if p.is_absolute() else (Path.cwd() / p, REPO_ROOT / p):
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def controller_note(recorded: str, sha256: str) -> str:
+    """One line on the controller file a run names: found here and the same file, changed, or absent
+    (replaying from action logs never needs it)."""
+    from hexbench.artifacts.files import sha256_file
+
+    found = find_controller(recorded)
+    if found is None:
+        return (f"controller {recorded}: not found in the current folder or the repository "
+                f"(not needed: episodes replay from their action logs)")
+    if sha256_file(found) == sha256:
+        return f"controller {recorded}: {found} is the file that made the episodes (sha256 matches)"
+    return (f"controller {recorded}: {found} differs from the file that made the episodes "
+            f"(recorded sha256 {sha256[:12]})")
+
+
 def _episodes_table(run_dir: Path):
     """The run's episode index as a DataFrame with absolute file paths (episodes.parquet, else the .mcap files)."""
     import pandas as pd
@@ -35,7 +62,11 @@ def _episodes_table(run_dir: Path):
     index = run_dir / "episodes.parquet"
     record_dir = run_dir / "episodes"
     if index.is_file():
-        table = pd.read_parquet(index)
+        try:
+            table = pd.read_parquet(index)
+        except (OSError, ValueError) as e:  # pyarrow's errors for a damaged file are ValueErrors
+            reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            _fail(f"{index}: unreadable episode index ({reason})", 2)
         for kind in ("mcap", "rrd"):
             col = f"{kind}_path"
             if col in table:
@@ -46,14 +77,14 @@ def _episodes_table(run_dir: Path):
     for f in files:
         try:
             log = read_episode(f, validate=False)
-        except EpisodeFileError:
+            e, o = log.episode, log.outcome
+            rows.append({"episode_id": e.get("episode_id", f.stem), "terrain": e.get("terrain"),
+                         "level": float(e.get("level", "nan")), "index": int(e.get("index", -1)),
+                         "seed": int(e.get("seed", -1)), "success": o.get("success"), "end_reason": o.get("end_reason"),
+                         "steps": o.get("steps"), "progress_m": o.get("progress_m"), "mcap_path": str(f),
+                         "rrd_path": str(f.with_suffix(".rrd")) if f.with_suffix(".rrd").is_file() else None})
+        except (EpisodeFileError, ValueError):  # not a hexbench episode, or malformed metadata: not listed
             continue
-        e, o = log.episode, log.outcome
-        rows.append({"episode_id": e.get("episode_id", f.stem), "terrain": e.get("terrain"),
-                     "level": float(e.get("level", "nan")), "index": int(e.get("index", -1)),
-                     "seed": int(e.get("seed", -1)), "success": o.get("success"), "end_reason": o.get("end_reason"),
-                     "steps": o.get("steps"), "progress_m": o.get("progress_m"), "mcap_path": str(f),
-                     "rrd_path": str(f.with_suffix(".rrd")) if f.with_suffix(".rrd").is_file() else None})
     return pd.DataFrame(rows)
 
 
@@ -122,10 +153,13 @@ def register(app: typer.Typer) -> None:
         if summary:
             from hexbench.recording.reader import EpisodeFileError, summary_text
 
+            mcap = _episode_file(episode, ".mcap")
             try:
-                typer.echo(summary_text(_episode_file(episode, ".mcap")))
+                typer.echo(summary_text(mcap))
             except EpisodeFileError as e:
                 _fail(str(e))
+            except (KeyError, ValueError, TypeError) as e:  # a CRC-valid file with odd contents
+                _fail(f"{mcap}: not a complete hexbench episode log ({type(e).__name__}: {e})")
             return
         import shutil
         import subprocess
@@ -161,7 +195,7 @@ def register(app: typer.Typer) -> None:
 
         p = Path(path)
         if p.is_dir():
-            from hexbench.replay.verify import verify_run
+            from hexbench.replay.verify import read_run_record, verify_run
             from hexbench.suite.seeds import read_seed_key
 
             try:
@@ -173,32 +207,56 @@ def register(app: typer.Typer) -> None:
             if not report.ok:
                 _fail(report.message)
             typer.echo(f"ok: {report.message}")
+            controller = read_run_record(p)["controller"]
+            typer.echo(controller_note(controller["file"], controller["sha256"]))
             return
+        if not p.suffix and not p.with_name(p.name + ".mcap").is_file():
+            _fail(f"{path}: no such run folder or episode file", 2)
+        from hexbench.recording.reader import read_episode
         from hexbench.replay.recording_verify import verify_episode
 
-        result = verify_episode(_episode_file(path, ".mcap"))
+        mcap = _episode_file(path, ".mcap")
+        result = verify_episode(mcap)
         if not result.ok:
             _fail(result.message)
         typer.echo(f"ok: {result.message}")
+        meta = read_episode(mcap, validate=False).episode
+        if meta.get("controller_file"):
+            typer.echo(controller_note(meta["controller_file"], meta.get("controller_sha256", "")))
 
     export = typer.Typer(help="Export logged episodes to other dataset formats.", no_args_is_help=True)
 
     @export.command("minari")
     def export_minari(
-        run_dir: str = typer.Argument(..., help="a run directory written by `hexbench run`"),
-        dataset_id: str = typer.Option(None, "--dataset-id", help="Minari dataset id (default hexbench/<run>-v0)"),
+        run_dir: str = typer.Argument(..., help="a run folder written by `hexbench run` (recorded or not), or a "
+                                                "folder of .mcap episode logs with their action logs"),
+        dataset_id: str = typer.Option(None, "--dataset-id", help="Minari dataset id (default hexbench/<run>-<task>-v0;"
+                                       " with several tasks, each task's name goes before the version)"),
     ) -> None:
-        """Write a Minari dataset (arrow format) from a run's logged episodes (optional extra `minari`)."""
+        """Write Minari datasets (arrow format), one per task, from a run's episodes replayed from their action logs
+        (optional extra `minari`)."""
+        import shlex
+
         try:
             import minari  # noqa: F401
         except ImportError:
             _fail("minari is not installed; install the optional extra with: pip install 'hexbench[minari]'")
-        from hexbench.replay.minari_export import export_run
+        from hexbench.errors import HexbenchError
+        from hexbench.replay.minari_export import datasets_folder, export_run
 
         try:
-            path = export_run(Path(run_dir), dataset_id)
-        except ValueError as e:
+            datasets = export_run(Path(run_dir), dataset_id, progress=True)
+        except HexbenchError as e:
             _fail(str(e), 2)
-        typer.echo(f"wrote Minari dataset {path}")
+        folder = datasets_folder(Path(run_dir))
+        for d in datasets:
+            note = "" if d.env_spec_problem is None else \
+                f"; no env spec stored ({d.env_spec_problem}): make the env with gym.make({d.gym_id!r})"
+            typer.echo(f"wrote Minari dataset {d.dataset_id} ({d.episodes} episodes, {d.steps} steps{note})")
+        first = datasets[0]
+        load = f"ds = minari.load_dataset({first.dataset_id!r})" + \
+            ("; env = ds.recover_environment()" if first.env_spec_problem is None else "")
+        typer.echo(f"in {folder}; load with: MINARI_DATASETS_PATH={shlex.quote(str(folder))} "
+                   f"python -c \"import minari; {load}; print(ds.total_episodes, 'episodes')\"")
 
     app.add_typer(export, name="export")

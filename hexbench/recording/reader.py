@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hexbench.errors import HexbenchError
 from hexbench.world.robot import LEG_NAMES
 
 
-class EpisodeFileError(Exception):
+class EpisodeFileError(HexbenchError):
     """An episode file is missing, unreadable or fails its CRC checks (one-line message)."""
 
 

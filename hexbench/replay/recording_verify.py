@@ -56,21 +56,29 @@ def verify_episode(mcap_path: str | Path) -> VerifyResult:
     missing = [k for k in ("protocol", "terrain", "level", "index", "seed", "episode_id") if k not in e]
     if missing:
         return VerifyResult(False, f"{mcap_path}: episode metadata lacks {', '.join(missing)}; cannot re-simulate")
-    actions_path = mcap_path.with_name(f"{e['episode_id']}{action_log.SUFFIX}")
+    try:
+        level, index, seed = float(e["level"]), int(e["index"]), int(e["seed"])
+        max_steps = int(e["max_steps"]) if "max_steps" in e else None
+        # the action log beside the episode file, wherever the run was made or is verified from
+        actions_path = mcap_path.with_name(f"{e['episode_id']}{action_log.SUFFIX}")
+    except ValueError:
+        return VerifyResult(False, f"{mcap_path}: episode metadata is malformed (level, index, seed, max_steps or "
+                                   f"episode id {e['episode_id']!r})")
     try:
         actions = action_log.read(actions_path, log.outcome.get("action_log_sha256"))
-        task = load_suite(e["protocol"]).task(e["terrain"], float(e["level"]))
+        task = load_suite(e["protocol"]).task(e["terrain"], level)
     except (HexbenchError, ValueError) as err:
         return VerifyResult(False, f"{mcap_path}: {err}")
-    if (actions.terrain, float(actions.level), actions.index, actions.seed) != \
-            (e["terrain"], float(e["level"]), int(e["index"]), int(e["seed"])):
+    if (actions.terrain, float(actions.level), actions.index, actions.seed) != (e["terrain"], level, index, seed):
         return VerifyResult(False, f"{mcap_path}: its action log {actions_path.name} belongs to another episode")
-    max_steps = int(e["max_steps"]) if "max_steps" in e else None
     with tempfile.TemporaryDirectory(prefix="hexbench_verify_") as tmp:
         meta = {k: v for k, v in e.items() if k not in ("max_steps", "residual_scale", "control_dt_s", "goal_distance_m")}
-        recorder = make_episode_recorder(Path(tmp), e["episode_id"], meta)
         try:
-            episode = play(task, int(e["seed"]), LoggedActions(actions, str(actions_path)), index=int(e["index"]),
+            recorder = make_episode_recorder(Path(tmp), e["episode_id"], meta)
+        except ValueError as err:  # an episode id that is no safe file name
+            return VerifyResult(False, f"{mcap_path}: {err}")
+        try:
+            episode = play(task, seed, LoggedActions(actions, str(actions_path)), index=index,
                            recorder=recorder, max_steps=None if max_steps in (None, task.max_steps) else max_steps,
                            where=str(actions_path))
         except HexbenchError as err:

@@ -29,16 +29,42 @@ def _attachment(path: Path, name: str) -> bytes:
 
 
 def rrd_from_mcap(mcap_path: str | Path, rrd_path: str | Path) -> Path:
-    """Write `rrd_path` (temporary name, then rename) from an episode's MCAP file; return it."""
+    """Write `rrd_path` (temporary name, then rename) from an episode's MCAP file; return it.
+    An unreadable or incomplete episode file is one EpisodeFileError."""
+    from google.protobuf.message import DecodeError
+
+    from hexbench.recording.rerun_episode import write_series_rrd
+
+    mcap_path, rrd_path = Path(mcap_path), Path(rrd_path)
+    log = read_episode(mcap_path)
+    try:
+        series, urdf, joints, mesh = _series(mcap_path)
+    except (KeyError, ValueError, IndexError, TypeError, DecodeError) as e:  # a CRC-valid file with odd contents
+        raise EpisodeFileError(f"{mcap_path}: not a complete hexbench episode log ({type(e).__name__}: {e})") from None
+    episode_id = log.episode.get("episode_id", mcap_path.stem)
+    try:
+        goal_x_m = float(log.episode.get("goal_distance_m", 2.5))
+    except ValueError:
+        raise EpisodeFileError(f"{mcap_path}: goal_distance_m {log.episode['goal_distance_m']!r} "
+                               f"is not a number") from None
+    tmp = rrd_path.with_name(f".{rrd_path.name}.{os.getpid()}.tmp")
+    try:
+        write_series_rrd(tmp, series, recording_id=episode_id, urdf=urdf, joints=joints, mesh=mesh, goal_x_m=goal_x_m)
+        os.replace(tmp, rrd_path)
+    finally:
+        tmp.unlink(missing_ok=True)
+    return rrd_path
+
+
+def _series(mcap_path: Path):
+    """The episode's Rerun series, URDF, joints and terrain mesh, decoded from its MCAP messages."""
     from foxglove_schemas_protobuf.JointStates_pb2 import JointStates
     from foxglove_schemas_protobuf.PoseInFrame_pb2 import PoseInFrame
     from foxglove_schemas_protobuf.SceneUpdate_pb2 import SceneUpdate
 
     from hexbench.recording.kinematics import joint_frames
-    from hexbench.recording.rerun_episode import RerunSeries, write_series_rrd
+    from hexbench.recording.rerun_episode import RerunSeries
 
-    mcap_path, rrd_path = Path(mcap_path), Path(rrd_path)
-    log = read_episode(mcap_path)
     urdf = _attachment(mcap_path, "robot.urdf").decode()
     joints = joint_frames(urdf)
     (_, scene_bytes), = list(iter_topic(mcap_path, "/terrain"))
@@ -74,13 +100,4 @@ def rrd_from_mcap(mcap_path: str | Path, rrd_path: str | Path) -> Path:
         plot_base_pos_m=np.array([pose[t][0] for t in plot_rows]).reshape(-1, 3),
         plot_base_quat_xyzw=np.array([pose[t][1] for t in plot_rows]).reshape(-1, 4),
     )
-    episode_id = log.episode.get("episode_id", mcap_path.stem)
-    goal_x_m = float(log.episode.get("goal_distance_m", 2.5))
-    tmp = rrd_path.with_name(f".{rrd_path.name}.{os.getpid()}.tmp")
-    try:
-        write_series_rrd(tmp, series, recording_id=episode_id, urdf=urdf, joints=joints, mesh=(vertices, triangles),
-                         goal_x_m=goal_x_m)
-        os.replace(tmp, rrd_path)
-    finally:
-        tmp.unlink(missing_ok=True)
-    return rrd_path
+    return series, urdf, joints, (vertices, triangles)
