@@ -7,7 +7,10 @@ seeded np.random.Generator, only to exercise validation, ranking and rendering.
 from __future__ import annotations
 
 import copy
+import json
 import math
+import shutil
+from pathlib import Path
 
 import numpy as np
 
@@ -15,6 +18,7 @@ from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.tasks import load_suite
 
 END_REASONS_FAILED = ("fall", "lateral_deviation", "stalled", "step_limit")
+PAPER_REFERENCE = Path(__file__).resolve().parent.parent / "leaderboard" / "paper_reference.json"
 
 
 def synthetic_record(label: str, capability: dict[str, float], seed: int, *, protocol: str = "v1",
@@ -60,6 +64,15 @@ def demo_records() -> list[dict]:
         synthetic_record("middling", {"rough": 9.5, "slopes": 11.5, "stairs": 6.0}, seed=2),
         synthetic_record("weak", {"rough": 7.0, "slopes": 9.0, "stairs": 4.5}, seed=3),
     ]
+
+
+def write_board(folder: Path, records: list[dict]) -> Path:
+    """`folder` made a leaderboard folder holding `records` (as <label>.json) and the paper reference."""
+    folder.mkdir(exist_ok=True)
+    for r in records:
+        (folder / f"{r['label']}.json").write_text(json.dumps(r))
+    shutil.copy(PAPER_REFERENCE, folder / "paper_reference.json")
+    return folder
 
 
 def mutated(record: dict, change) -> dict:

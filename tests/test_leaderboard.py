@@ -10,16 +10,16 @@ import shutil
 from pathlib import Path
 
 import pytest
-from leaderboard_records import demo_records, mutated, synthetic_record
+from leaderboard_records import PAPER_REFERENCE, demo_records, mutated, synthetic_record, write_board
 from typer.testing import CliRunner
 
 from hexbench import leaderboard as lb
 from hexbench.cli import app
+from hexbench.leaderboard.markdown import md_code, md_table, md_text
 from hexbench.suite import scoring
 from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
-PAPER_REFERENCE = REPO / "leaderboard" / "paper_reference.json"
 
 
 @pytest.fixture(scope="module")
@@ -29,12 +29,7 @@ def records() -> list[dict]:
 
 @pytest.fixture()
 def board_dir(tmp_path: Path, records: list[dict]) -> Path:
-    d = tmp_path / "board"
-    d.mkdir()
-    for r in records:
-        (d / f"{r['label']}.json").write_text(json.dumps(r))
-    shutil.copy(PAPER_REFERENCE, d / "paper_reference.json")
-    return d
+    return write_board(tmp_path / "board", records)
 
 
 # ------------------------------------------------------------------------------ Wilson maths
@@ -84,6 +79,10 @@ def _terrain_auc_off(r):
     r["terrains"][1]["auc"] = 0.123
 
 
+def _level_field_missing(r):
+    del r["levels"][0]["mean_cost_of_transport"]
+
+
 def _success_flag_disagrees(r):
     r["episodes"][0]["end_reason"] = "fall"
 
@@ -122,6 +121,7 @@ def _foreign_terrain(r):
     (_duplicate_episode, r"duplicate of episodes\[4\]"),
     (_level_rate_off, r"summary disagrees with its episodes: level rough 5 success_rate is 0\.5+ in the record but "),
     (_terrain_auc_off, r"summary disagrees with its episodes: terrain slopes auc is 0\.123 in the record but"),
+    (_level_field_missing, r"summary disagrees with its episodes: level rough 3 mean_cost_of_transport is missing "),
     (_success_flag_disagrees, r"success is true but end_reason is 'fall'"),
     (_unknown_protocol, r"unknown protocol 'v9'; valid protocols: v1"),
     (_empty_commit, r"provenance\.git_commit is empty"),
@@ -472,20 +472,17 @@ def _hostile_reported() -> dict:
 
 
 @pytest.fixture()
-def hostile_dir(tmp_path: Path, records: list[dict]) -> Path:
-    d = tmp_path / "hostile"
-    d.mkdir()
-    for r in records:
-        (d / f"{r['label']}.json").write_text(json.dumps(r))
-    (d / HOSTILE_FILE).write_text(json.dumps(_hostile_measured()))
+def hostile_dir(board_dir: Path) -> Path:
+    """board_dir with two records of hostile strings added and a hostile paper reference, built."""
+    (board_dir / HOSTILE_FILE).write_text(json.dumps(_hostile_measured()))
     code = _hostile_measured("a|b `c`", seed=5)
     code["provenance"]["command"] = CODE_COMMAND
-    (d / "code.json").write_text(json.dumps(code))
-    (d / "paper_reference.json").write_text(json.dumps(_hostile_reported()))
-    result = lb.build(d)
+    (board_dir / "code.json").write_text(json.dumps(code))
+    (board_dir / "paper_reference.json").write_text(json.dumps(_hostile_reported()))
+    result = lb.build(board_dir)
     assert result.errors == [] and HOSTILE in {r.label for r in result.board.measured}
     assert "-" + HOSTILE + " (paper)" in {r.label for r in result.board.reported}
-    return d
+    return board_dir
 
 
 def _md_table_lines(text: str) -> list[list[str]]:
@@ -539,17 +536,17 @@ def _parse_html(text: str):
 def test_markdown_escaping_leaves_plain_strings_alone_and_defuses_the_rest():
     for plain in ("ppo_cpg", "PPO-CPG (paper)", "PPO-CPG, the paper's method (paper)", "cpg_residual",
                   "baselines/checkpoints/terrain_classifier.pt", "66598280c7e8", "Table 4"):
-        assert lb._md(plain) == plain and lb._md(plain, block=True) == plain
-    assert lb._md("<img src=x> a&b") == "&lt;img src=x&gt; a&amp;b"
-    assert lb._md("[x](javascript:alert(1)) *a* _b_ `c` ~d~ $e$ \\") == (
+        assert md_text(plain) == plain and md_text(plain, block=True) == plain
+    assert md_text("<img src=x> a&b") == "&lt;img src=x&gt; a&amp;b"
+    assert md_text("[x](javascript:alert(1)) *a* _b_ `c` ~d~ $e$ \\") == (
         "\\[x\\](javascript:alert(1)) \\*a\\* \\_b\\_ \\`c\\` \\~d\\~ \\$e\\$ \\\\")
-    assert lb._md("a\nb\r\tc\x00") == "a b  c "
-    assert lb._md("# h", block=True) == "\\# h" and lb._md("1. x", block=True) == "1\\. x"
-    assert lb._md("- x", block=True) == "\\- x" and lb._md("- x") == "- x"
-    assert lb._md_code("hexbench run a_b.py") == "`hexbench run a_b.py`"
-    assert lb._md_code("a ``b`` c") == "```a ``b`` c```" and lb._md_code("`a`") == "`` `a` ``"
-    assert lb._md_code("a <b>\nc") == "a &lt;b&gt; c"  # no raw tag in the file, not even in a code span
-    assert lb._md_table(["h|x"], [["a|b"]]) == "| h\\|x |\n| --- |\n| a\\|b |"
+    assert md_text("a\nb\r\tc\x00") == "a b  c "
+    assert md_text("# h", block=True) == "\\# h" and md_text("1. x", block=True) == "1\\. x"
+    assert md_text("- x", block=True) == "\\- x" and md_text("- x") == "- x"
+    assert md_code("hexbench run a_b.py") == "`hexbench run a_b.py`"
+    assert md_code("a ``b`` c") == "```a ``b`` c```" and md_code("`a`") == "`` `a` ``"
+    assert md_code("a <b>\nc") == "a &lt;b&gt; c"  # no raw tag in the file, not even in a code span
+    assert md_table(["h|x"], [["a|b"]]) == "| h\\|x |\n| --- |\n| a\\|b |"
 
 
 def test_hostile_record_strings_render_as_literal_text_in_readme(hostile_dir):

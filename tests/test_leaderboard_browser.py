@@ -7,7 +7,6 @@ nothing on purpose, so any such line is a failure. A second run takes a screensh
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shutil
@@ -17,11 +16,10 @@ from html.parser import HTMLParser
 from pathlib import Path
 
 import pytest
-from leaderboard_records import demo_records
+from leaderboard_records import demo_records, write_board
 
 from hexbench import leaderboard as lb
 
-REPO = Path(__file__).resolve().parent.parent
 CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
                   "--disable-background-networking", "--disable-component-update", "--disable-sync")
 # Appended to a copy of the page: records the row order, clicks the Rank header twice (descending)
@@ -97,10 +95,7 @@ class _DomSummary(HTMLParser):
 
 @pytest.fixture(scope="module")
 def built_page(tmp_path_factory) -> Path:
-    d = tmp_path_factory.mktemp("leaderboard")
-    for record in demo_records():
-        (d / f"{record['label']}.json").write_text(json.dumps(record))
-    shutil.copy(REPO / "leaderboard" / "paper_reference.json", d / "paper_reference.json")
+    d = write_board(tmp_path_factory.mktemp("leaderboard"), demo_records())
     lb.build(d)
     return d / "index.html"
 

@@ -1,4 +1,4 @@
-"""`hexbench leaderboard build` and `hexbench leaderboard add RESULT.json` (see hexbench/leaderboard/__init__.py)."""
+"""`hexbench leaderboard build` and `hexbench leaderboard add RUN_DIR` (the package hexbench/leaderboard/)."""
 
 from __future__ import annotations
 

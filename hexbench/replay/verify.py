@@ -5,12 +5,14 @@ controller that made it. For every episode row (or a random sample of them), the
 hash to the row's sha256 and replay into exactly the row's outcome; the record's per-level and
 per-terrain summaries must follow from its rows, its episodes digest must match them, and the
 seeds must be the protocol's (public seed set) or the key's (keyed set, given the key). The first
-mismatch is named. Leaderboard admission runs the same checks.
+mismatch is named. Leaderboard admission runs the same checks, and the leaderboard checks every
+record's summaries with the same `summaries_from_rows` and `summary_disagreement`.
 """
 
 from __future__ import annotations
 
 import json
+import math
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from multiprocessing import get_context
@@ -24,6 +26,10 @@ from hexbench.evaluation.episode import first_row_difference, replay_row
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedSet
 from hexbench.suite.tasks import format_level, load_suite
+
+# Stored summaries may differ from the ones recomputed from the rows by float round-off only.
+REL_TOLERANCE = 1e-9
+ABS_TOLERANCE = 1e-12
 
 
 class VerifyError(HexbenchError):
@@ -59,18 +65,78 @@ def _episode_name(row: dict, unit: str) -> str:
     return f"{row['terrain']} {format_level(row['level'])}{unit} episode {row['index']}"
 
 
+def same_up_to_round_off(a, b) -> bool:
+    """Equal values; numbers equal up to float round-off (REL_TOLERANCE, ABS_TOLERANCE), lists item by item."""
+    if a is None or b is None:
+        return a is None and b is None
+    if isinstance(a, bool) or isinstance(b, bool):
+        return a is b
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        return math.isclose(a, b, rel_tol=REL_TOLERANCE, abs_tol=ABS_TOLERANCE)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(same_up_to_round_off(x, y) for x, y in zip(a, b))
+    return a == b
+
+
+def _show(value) -> str:
+    return "null" if value is None else json.dumps(value) if not isinstance(value, float) else f"{value:.6g}"
+
+
+def summaries_from_rows(rows: list[dict], units: dict[str, str],
+                        headroom: dict[tuple[str, float], bool]) -> tuple[list[dict], list[dict]]:
+    """The per-level and per-terrain summaries of episode rows (hexbench.suite.scoring)."""
+    levels = summarize_levels(rows, units, headroom)
+    return levels, summarize_terrains(levels)
+
+
+def _summaries_disagreement(stored: list[dict], recomputed: list[dict], key_fields: tuple[str, ...],
+                            what: str) -> str | None:
+    def key(d: dict) -> tuple:
+        return tuple(format_level(d[k]) if k == "level" else d[k] for k in key_fields)
+
+    stored_by_key = {}
+    for d in stored:
+        if key(d) in stored_by_key:
+            return f"{what} {' '.join(key(d))} appears twice in the record"
+        stored_by_key[key(d)] = d
+    fresh_by_key = {key(d): d for d in recomputed}
+    for k in sorted(set(stored_by_key) | set(fresh_by_key)):
+        label = " ".join(k)
+        if k not in stored_by_key:
+            return f"summary disagrees with its episodes: {what} {label} is missing from the record"
+        if k not in fresh_by_key:
+            return f"summary disagrees with its episodes: {what} {label} has no episodes"
+        s, f = stored_by_key[k], fresh_by_key[k]
+        for name, fresh in f.items():
+            if name not in s:
+                return f"summary disagrees with its episodes: {what} {label} {name} is missing from the record"
+            if not same_up_to_round_off(s[name], fresh):
+                return (f"summary disagrees with its episodes: {what} {label} {name} is {_show(s[name])} in the "
+                        f"record but {_show(fresh)} recomputed from the episodes")
+        extra = sorted(set(s) - set(f))
+        if extra:
+            return f"summary disagrees with its episodes: {what} {label} {extra[0]} is not a summary of its episodes"
+    return None
+
+
+def summary_disagreement(record: dict, levels: list[dict], terrains: list[dict]) -> str | None:
+    """The first way in which the record's stored `levels` and `terrains` summaries differ from the
+    ones recomputed from its rows (`summaries_from_rows`): a summary missing, extra or twice, a field
+    missing or extra, or a value beyond float round-off; None if they agree."""
+    return (_summaries_disagreement(record["levels"], levels, ("terrain", "level"), "level")
+            or _summaries_disagreement(record["terrains"], terrains, ("terrain",), "terrain"))
+
+
 def check_summaries(record: dict) -> str | None:
-    """The first way in which the record's summaries, digest or seeds do not follow from its rows."""
+    """The first way in which the record's summaries or digest do not follow from its rows."""
     rows = record["episodes"]
     units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
     headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
     if any(r["terrain"] not in units or (r["terrain"], r["level"]) not in headroom for r in rows):
         return "an episode row belongs to no level of the record"
-    levels = summarize_levels(rows, units, headroom)
-    if json.dumps(levels, sort_keys=True) != json.dumps(record["levels"], sort_keys=True):
-        return "the per-level summaries do not follow from the episode rows"
-    if json.dumps(summarize_terrains(levels), sort_keys=True) != json.dumps(record["terrains"], sort_keys=True):
-        return "the per-terrain summaries do not follow from the episode rows"
+    problem = summary_disagreement(record, *summaries_from_rows(rows, units, headroom))
+    if problem:
+        return problem
     if record.get("episodes_digest") != episodes_digest(rows):
         return "the episodes digest does not match the episode rows"
     return None

@@ -1,0 +1,141 @@
+"""`hexbench leaderboard add`: a record joins the leaderboard folder, a measured one only after its run replays.
+
+A measured record comes with its run folder; `admit` replays its episodes from their action logs
+(hexbench.replay.verify, all of them or a sample) and adds the admission block that binds the
+record's rows, by their digest, to that replay. `--replace` overwrites a record of the same name,
+never with a less proven one (a lower trust tier, or the same tier with a smaller share replayed).
+Labels are unique across the folder; extra-course records go to `courses/`.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit
+from hexbench.leaderboard.courses import COURSES_DIR, is_course_record
+from hexbench.leaderboard.generate import GENERATED_FILES, write_all_atomically
+from hexbench.leaderboard.records import (
+    TIER_ORDER,
+    TIER_SELF_REPORTED,
+    RecordError,
+    Row,
+    measured_row,
+    read_record,
+    record_files,
+    record_tier,
+    rows_of,
+)
+from hexbench.replay.verify import verify_run
+from hexbench.suite.tasks import DEFAULT_PROTOCOL
+
+
+def slug(label: str) -> str:
+    s = re.sub(r"[^a-z0-9]+", "_", label.lower()).strip("_")
+    return s or "record"
+
+
+def _admission_source(source: Path) -> tuple[Path, Path | None]:
+    """(record path, run folder or None) of what `leaderboard add` was given."""
+    if source.is_dir():
+        return source / "result.json", source
+    if source.name == "result.json" and (source.parent / "episodes").is_dir():
+        return source, source.parent
+    return source, None
+
+
+def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None = None, workers: int = 1,
+          seed_set=None, rng=None, progress: bool = False) -> dict:
+    """Replay a measured run before it joins; return the record with its admission block. RecordError if refused."""
+    if run_dir is None:
+        raise RecordError(f"{where}: a measured record joins only with its run folder (its action logs), e.g. "
+                          f"`hexbench leaderboard add runs/NAME`; a record alone cannot be replayed")
+    isolation = record["provenance"].get("isolation") or {}
+    if not isolation.get("sandboxed"):
+        raise RecordError(f"{where}: was not made in a sandbox (isolation {isolation.get('mode', 'unknown')!r}); "
+                          f"re-run it with `hexbench run` (bubblewrap or process isolation)")
+    keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed"
+    if keyed and (seed_set is None or seed_set.key is None):
+        raise RecordError(f"{where}: has a keyed seed set; admission needs the key (--seed-key FILE) to check its seeds")
+    report = verify_run(run_dir, sample=sample, rng=rng, workers=workers, seed_set=seed_set, progress=progress)
+    if not report.ok:
+        raise RecordError(f"refused: {report.message}")
+    admitted = {k: v for k, v in record.items() if k != "admission"}
+    admitted["admission"] = {"verified_by": "replay of action logs", "episodes_replayed": report.episodes_replayed,
+                             "episodes_total": report.episodes_total, "episodes_digest": record["episodes_digest"],
+                             "hexbench_version": HEXBENCH_VERSION, "git_commit": git_commit()}
+    return admitted
+
+
+def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest: Path, where: Path) -> None:
+    """RecordError if another record of the same protocol in `directory` already uses one of the labels."""
+    new_labels = {r.label for r in rows}
+    for path in record_files(directory):
+        if path.resolve() == dest.resolve():
+            continue
+        try:
+            other = read_record(path)
+        except RecordError:
+            continue
+        other_labels = ({s["label"] for s in other.get("reported", {}).get("series", [])}
+                        if other.get("kind") == "reported" else {other.get("label")})
+        clash = sorted(new_labels & other_labels)
+        if clash and other.get("protocol") == record["protocol"]:
+            raise RecordError(f"{where}: label {clash[0]!r} is already used by {path}; choose another label")
+
+
+def _refuse_downgrade(dest: Path, record: dict, where: str) -> None:
+    """--replace never puts a less proven record in place of a more proven one."""
+    try:
+        old = read_record(dest)
+        old_tier = record_tier(old, str(dest)) if old.get("kind") == "measured" else TIER_SELF_REPORTED
+    except RecordError:
+        return
+    new_tier = record_tier(record, where)
+    if TIER_ORDER[new_tier] < TIER_ORDER[old_tier]:
+        raise RecordError(f"{where}: is {new_tier}, {dest} is {old_tier}; --replace never puts a less proven record "
+                          f"in its place")
+    old_share = (old.get("admission") or {}).get("episodes_replayed", 0) / max(1, len(old.get("episodes", [])))
+    new_share = record["admission"]["episodes_replayed"] / max(1, len(record["episodes"]))
+    if new_tier == old_tier and new_share < old_share:
+        raise RecordError(f"{where}: replayed {new_share:.0%} of its episodes, {dest} {old_share:.0%}; --replace never "
+                          f"puts a less proven record in its place (admit it with fewer --sample or none)")
+
+
+def add(result_path: str | Path, directory: str | Path = "leaderboard", replace: bool = False,
+        protocol: str = DEFAULT_PROTOCOL, *, sample: int | None = None, workers: int = 1, seed_set=None,
+        progress: bool = False) -> Path:
+    """Validate a record, replay its run (measured records), and copy it into `directory` as
+    <slug(label)>.json; RecordError if refused."""
+    result_path, run_dir = _admission_source(Path(result_path))
+    directory = Path(directory)
+    record = read_record(result_path)
+    if is_course_record(record):  # extra courses are scored apart, in their own folder
+        rows = [measured_row(record, str(result_path), course=True)]
+        if not directory.is_dir():
+            raise RecordError(f"{directory}: no such leaderboard directory")
+        directory = directory / COURSES_DIR
+        directory.mkdir(exist_ok=True)
+    else:
+        rows = rows_of(record, str(result_path))
+    if record["protocol"] != protocol:
+        raise RecordError(f"{result_path}: record is protocol {record['protocol']}, this leaderboard shows {protocol} "
+                          "(records of different protocols are never mixed; pass --protocol to choose)")
+    if not directory.is_dir():
+        raise RecordError(f"{directory}: no such leaderboard directory")
+    name = "paper_reference.json" if record["kind"] == "reported" else f"{slug(record['label'])}.json"
+    dest = directory / name
+    if name in GENERATED_FILES:
+        raise RecordError(f"{result_path}: label {record['label']!r} would overwrite a generated file")
+    _check_labels_are_free(rows, record, directory, dest, result_path)
+    if dest.exists() and dest.resolve() != result_path.resolve() and not replace:
+        raise RecordError(f"{dest} already exists; pass --replace to overwrite it")
+    if record["kind"] == "measured":
+        record = admit(record, run_dir, str(result_path), sample=sample, workers=workers, seed_set=seed_set,
+                       progress=progress)
+        if dest.exists():
+            _refuse_downgrade(dest, record, str(result_path))
+    if dest.resolve() != result_path.resolve():
+        write_all_atomically({dest: json.dumps(record, indent=1) + "\n"})
+    return dest
