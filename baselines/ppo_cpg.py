@@ -7,11 +7,10 @@ Hyper-parameters: paper Table 2. eps is the terrain default of paper 3.2 (0.6 ro
 0.3 stairs). Table 2's "number of epochs 4x10^4" is read as the number of PPO iterations over
 the whole run, not SB3's n_epochs (passes over one rollout), which stays at SB3's default of 10.
 
-How each shipped checkpoint was trained is its manifest entry's `command` (baselines/checkpoints/
-manifest.json). The rough weights (since session 11) are this config warm-started from the
-earlier rough weights and trained with gSDE exploration:
+How each shipped checkpoint was trained is its manifest entry's `command` and `init_from`
+(baselines/checkpoints/manifest.json; summary in docs/training.md, "Recipes"). The rough and slopes
+weights are warm starts trained with gSDE exploration, e.g. rough:
     --init-from <earlier ppo_cpg-rough.zip> --set use_sde=True --set sde_sample_freq=120 --set log_std_init=-3.5
-(docs/training.md, "Warm starts and gSDE").
 """
 
 from dataclasses import dataclass

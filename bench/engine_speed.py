@@ -1,4 +1,4 @@
-"""The same episodes through the local process pool and through Ray (issue: beyond one machine).
+"""The same episodes through the local process pool and through Ray.
 
     python bench/engine_speed.py                           # 2 workers, 2 episodes x first 2 levels per terrain
     python bench/engine_speed.py --workers 1 2 4 8 16      # scaling, where the cores exist

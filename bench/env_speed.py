@@ -1,4 +1,4 @@
-"""Environment step cost against raw physics stepping of the same world (issue 2).
+"""Environment step cost against raw physics stepping of the same world.
 
 For each terrain, two copies of the same world are built: a `HexapodEnv` (cpg_residual mode,
 a_r = 0, default observation noise: the open-loop CPG walking) and a second env of the same
@@ -12,7 +12,7 @@ both sides alike.
 
     ratio = (env time per step) / (raw stepSimulation time per control step)
 
-The issue's target is ratio <= 1.15. Times are CPU time of this process
+The target is ratio <= 1.15. Times are CPU time of this process
 (`time.process_time_ns`; PyBullet DIRECT runs in this thread); each terrain is measured
 `--repeats` times and the median of each side is used.
 
@@ -46,7 +46,7 @@ from hexbench.world.env import EnvConfig, HexapodEnv
 
 # The lowest evaluation level of each terrain (paper Table 4), where the open-loop CPG
 # walks the whole way, so the robot stays in normal walking contact for the whole run.
-# The terrains the issue's target names; the mixed (HLTA) course is composed of these.
+# The terrains the 1.15 target names; the mixed (HLTA) course is composed of these.
 BENCH_LEVELS: dict[str, float] = {"flat": 0.0, "rough": 3.0, "slopes": 6.0, "stairs": 2.0}
 SEED = 12345
 

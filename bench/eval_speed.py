@@ -1,4 +1,4 @@
-"""Full-protocol wall time of the CPG baseline with 1 and 2 workers (issue: evaluation speed).
+"""Full-protocol wall time of the CPG baseline with 1 and 2 workers.
 
     python bench/eval_speed.py                      # full protocol v1, 1 then 2 workers
     python bench/eval_speed.py --episodes 4         # 4 episodes per level (quick estimate)

@@ -1,4 +1,4 @@
-"""What episode recording costs: evaluation time with and without recording, and bytes per episode (issue 4).
+"""What episode recording costs: evaluation time with and without recording, and bytes per episode.
 
 The open-loop CPG baseline (baselines/cpg.py) is evaluated with `hexbench.evaluation.evaluate.evaluate`
 on a task selection twice per repeat, once with `record=False` and once with `record=True`
@@ -17,7 +17,7 @@ size is an episode that runs to the step limit (4000 steps): the bench also driv
 directly for `--long-steps` steps on rough 6 cm with the goal moved out of reach (and no
 lateral-deviation or fall end), once with the open-loop CPG (zero residual) and once with a
 white-noise residual (sigma 0.3, a pessimistic stand-in for a learned policy: noisy actions
-compress worst), and reports those files' bytes. The issue's targets are a time ratio <= 1.05
+compress worst), and reports those files' bytes. The targets are a time ratio <= 1.05
 and <= 1 MB per episode for both files together.
 
     python bench/record_overhead.py                              # one level per terrain, 2 episodes each
@@ -107,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", help="also write the results to this JSON file")
     args = ap.parse_args(argv)
 
-    import hexbench.recording as recording
+    from hexbench import recording
     from hexbench.suite.tasks import load_suite
 
     suite = load_suite("v1")

@@ -1,4 +1,4 @@
-"""Training throughput: env steps per second of wall-clock time for PPO and SAC with 1 and 2 workers (issue 5).
+"""Training throughput: env steps per second of wall-clock time for PPO and SAC with 1 and 2 workers.
 
 Each case is a fresh `hexbench.training.train.train` run (the real training path: curriculum env with noise,
 Monitor, fixed observation scaling, SB3 learner, our callback) on rough terrain, timed by the run's

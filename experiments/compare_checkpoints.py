@@ -1,15 +1,15 @@
-"""Held-out head-to-head of checkpoints from different training runs (issue 5).
+"""Held-out head-to-head of checkpoints from different training runs.
 
 `hexbench checkpoints select` ranks the checkpoints of one run. To choose between the best of two
-runs, this plays each named checkpoint on the same held-out seeds (hexbench.training.selection's `heldout`
-namespace, never a protocol seed) at the levels given, under the protocol's rules, and prints
-successes per level, and forward progress (mean and max over all its episodes), which tells
-checkpoints apart where none arrives. Nothing is written to the runs' selection.json. A level
-between suite levels (e.g. slopes 19.5) plays under the next suite level's rules, with its own
-held-out seeds: a diagnostic of thresholds, not a score.
+runs, this plays each named checkpoint's deterministic policy on the same held-out seeds
+(`hexbench.training.selection.heldout_seeds`, never a protocol seed) at the levels given, under the
+protocol's rules, and prints successes per level and forward progress (mean and max over all its
+episodes), which tells checkpoints apart where none arrives. Nothing is written to the runs'
+selection.json. A level between suite levels (e.g. slopes 19.5) plays under the next suite level's
+rules, with its own held-out seeds (levels.task_between): a diagnostic of thresholds, not a score.
 
-    python bench/compare_checkpoints.py training/ppo_cpg-rough-seed0-v2:180502 \\
-        training/ppo_cpg-rough-seed0-v4:218704 --levels 5 7 9 11 --episodes 20 --workers 2
+    python experiments/compare_checkpoints.py training/RUN_A:ENV_STEPS training/RUN_B:ENV_STEPS \\
+        --levels 5 7 9 11 --episodes 20 --workers 2
 """
 
 from __future__ import annotations
@@ -17,14 +17,16 @@ from __future__ import annotations
 import argparse
 import json
 from collections import Counter, defaultdict
+from dataclasses import replace
 from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
+from levels import task_between
 
 from hexbench.suite.tasks import load_suite
-from hexbench.training.selection import heldout_seeds, score_job
-from hexbench.training.train import TrainError, checkpoint_at, read_run
+from hexbench.training.selection import heldout_seeds
+from hexbench.training.train import TrainError, checkpoint_at, load_baseline_config, read_run
 
 
 def parse_candidate(text: str) -> tuple[dict, Path, dict]:
@@ -37,6 +39,35 @@ def parse_candidate(text: str) -> tuple[dict, Path, dict]:
         return run, Path(run_dir), checkpoint_at(Path(run_dir), run, steps)
     except TrainError as e:
         raise SystemExit(f"error: {e}") from None
+
+
+def run_config(run: dict):
+    """The baseline CONFIG a run was trained with: its file's dataclass with the run's recorded values."""
+    base = load_baseline_config(Path(run["baseline_file"]))
+    return replace(base, **{k: tuple(v) if isinstance(v, list) else v for k, v in run["config"].items()})
+
+
+def score(job: tuple) -> tuple[str, float, int, dict]:
+    """One held-out episode: job = (run.json, run directory, checkpoint entry, level, seed) ->
+    (checkpoint sha256, level, seed, outcome or {"error": one line})."""
+    import torch
+
+    from hexbench.agents.policy import PolicyController, load_policy
+    from hexbench.artifacts.manifest import CheckpointError
+    from hexbench.suite.rollout import LocalActor, play
+
+    torch.set_num_threads(1)
+    run, run_dir, ckpt, level, seed = job
+    config = run_config(run)
+    try:
+        policy = load_policy(config, Path(run_dir) / ckpt["file"], ckpt["sha256"])
+    except CheckpointError as e:
+        return ckpt["sha256"], level, seed, {"error": str(e)}
+    task = task_between(load_suite(), run["terrain"], level)
+    actor = LocalActor(PolicyController(config.action_mode, policy))
+    row = play(task, seed, actor, where="policy", residual_scale=config.residual_scale).row
+    return ckpt["sha256"], level, seed, {"success": row["success"], "progress_m": round(float(row["progress_m"]), 4),
+                                         "end_reason": row["end_reason"]}
 
 
 def main() -> None:
@@ -54,13 +85,15 @@ def main() -> None:
     terrain = terrains.pop()
     try:
         for level in args.levels:
-            load_suite().task_between(terrain, level)
-    except ValueError as e:
+            task_between(load_suite(), terrain, level)
+        for run, _, _ in candidates:
+            run_config(run)
+    except (ValueError, TrainError) as e:
         raise SystemExit(f"error: {e}") from None
-    jobs = [(run, str(d), c, lv, seed, True) for run, d, c in candidates for lv in args.levels
+    jobs = [(run, str(d), c, lv, seed) for run, d, c in candidates for lv in args.levels
             for seed in heldout_seeds(terrain, lv, args.episodes)]
     with get_context("spawn").Pool(args.workers) as pool:
-        outcomes = list(pool.imap_unordered(score_job, jobs))
+        outcomes = list(pool.imap_unordered(score, jobs))
     names = {c["sha256"]: f"{d}:{c['env_steps']}" for _, d, c in candidates}
     wins: dict[str, dict[float, int]] = defaultdict(lambda: defaultdict(int))
     ends: dict[str, Counter] = defaultdict(Counter)

@@ -1,7 +1,7 @@
-"""Can a residual carry the CPG over the 20-deg slope crest? Hand-made residuals (issue 5, slopes).
+"""Can a residual carry the CPG over the 20-deg slope crest? Hand-made residuals on slopes.
 
-The open-loop CPG passes slopes 18 deg and stalls at the crest of 20 deg (bench/stall_trace.py);
-so does the shipped PPO-CPG, which never saw a slope steeper than its curriculum's 18 deg. This
+The open-loop CPG passes slopes 18 deg and stalls at the crest of 20 deg (experiments/stall_trace.py);
+so did PPO-CPG trained on the paper's curriculum, whose top is 18 deg. This
 plays simple hand-made residuals a_r on protocol episodes of one slopes level (the task's rules:
 stall window, step limit, observation noise, the protocol's episode seeds) and prints how each
 episode ends and how far it got:
@@ -15,7 +15,7 @@ episode ends and how far it got:
 A residual that gets over the crest says the crest is within a residual's reach; its speed says
 whether the rest of the course fits in the step limit.
 
-    python bench/crest_residual.py [--level 20] [--episodes 3]
+    python experiments/crest_residual.py [--level 20] [--episodes 3]
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import argparse
 import time
 
 import numpy as np
+from levels import task_between
 from residual_episode import Residual, play_residual
 
 from hexbench.suite.tasks import load_suite
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--episodes", type=int, default=3, help="protocol episodes per residual")
     args = parser.parse_args(argv)
     try:  # a level between suite levels: the next suite level's rules, seeds derived from the level
-        task = load_suite().task_between("slopes", args.level)
+        task = task_between(load_suite(), "slopes", args.level)
     except ValueError as e:
         raise SystemExit(f"error: {e}") from None
     config = task.env_config("cpg_residual")

@@ -1,4 +1,4 @@
-"""How much exploration noise the CPG gait survives (issue 5): the open-loop CPG with a zero-mean residual.
+"""How much exploration noise the CPG gait survives: the open-loop CPG with a zero-mean residual.
 
 A fresh PPO-CPG policy acts as a_t = a_c + eps * a_r with a_r drawn from N(mean ~ 0, std) anew at
 every 60 Hz control step (SB3's Gaussian policy; ppo_cpg.py starts at std 0.10). This plays that
@@ -6,7 +6,7 @@ policy's noise alone (mean exactly 0) on the CPG, under the env's episode rules,
 episode ends: whether the stochastic policy of early training can arrive at all at a level, which
 the curriculum needs (20 arrivals per level) and the deterministic protocol does not.
 
-    python bench/exploration_noise.py --terrain slopes --levels 11,14,17 --eps 0.4 --std 0,0.05,0.1 --seeds 3
+    python experiments/exploration_noise.py --terrain slopes --levels 11,14,17 --eps 0.4 --std 0,0.05,0.1 --seeds 3
 
 With `--gsde-period N` the noise is state-dependent and smooth in time instead, as SB3's gSDE draws
 it: a_r = (f / |f|) W * std, f the last hidden layer of a fresh ppo_cpg.py actor (256 features of
@@ -14,7 +14,7 @@ the observation, so it follows the gait phase), W a matrix of standard normals r
 control steps; every joint's noise then has the given std. (A fresh actor's |f| is about 3.4, so
 SB3's log_std_init = ln(std / 3.4): std 0.06 is about -4.0.)
 
-    python bench/exploration_noise.py --terrain slopes --levels 20 --eps 0.4 --std 0.04,0.06,0.1 --gsde-period 120
+    python experiments/exploration_noise.py --terrain slopes --levels 20 --eps 0.4 --std 0.04,0.06,0.1 --gsde-period 120
 """
 
 from __future__ import annotations

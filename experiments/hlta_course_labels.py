@@ -1,4 +1,4 @@
-"""How well the terrain classifier labels the mixed course while the robot walks it (issue 7).
+"""How well the terrain classifier labels the mixed course while the robot walks it.
 
 The terrain-image dataset photographs each obstacle from the flat approach in front of it; on the
 mixed course the HLTA layer sees terrain from everywhere along the way (on rough ground, on a
@@ -8,7 +8,7 @@ as `hexbench run`), classifies it, and compares the label with the segment the c
 the course segment under the point `--lookahead` m ahead of the base (rough before the middle of
 the rough-slope gap, slopes before the middle of the slope-stairs gap, stairs after).
 
-    .venv/bin/python bench/hlta_course_labels.py [--levels 1,2,3] [--episodes 3] [--json out.json]
+    .venv/bin/python experiments/hlta_course_labels.py [--levels 1,2,3] [--episodes 3] [--json out.json]
 
 Prints per-segment accuracy and the confusion counts (rows: truth, columns: label).
 """

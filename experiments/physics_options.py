@@ -1,4 +1,4 @@
-"""What the 10-minute full protocol would cost in physics fidelity (issue 3's evidence).
+"""What a 10-minute full protocol run would cost in physics fidelity.
 
 The full protocol v1 run of the open-loop CPG simulates 27,994 s of robot time
 (sum of `sim_time_s` over leaderboard/cpg.json). Ten minutes on 2 cores is 1,200 CPU-s, so a
@@ -8,8 +8,8 @@ controller included. This script measures, for protocol v1's physics and for che
 second with the open-loop CPG walking (a_r = 0), and the CPG's outcomes at hard levels on the same
 seeds, so a protocol v2 decision can weigh speed against changed outcomes.
 
-    python bench/physics_options.py                     # 4 seeds per level (a few minutes)
-    python bench/physics_options.py --seeds 6 --json bench/out/physics_options.json
+    python experiments/physics_options.py                     # 4 seeds per level (a few minutes)
+    python experiments/physics_options.py --seeds 6 --json physics_options.json
 
 Projected full-protocol wall time = 27,994 s x (CPU per simulated s) / 2 cores: an ideal 2-worker
 run of the physics alone (no controller, perfect scaling), so a lower bound.

@@ -1,4 +1,4 @@
-"""Screenshot of an episode's .rrd in the Rerun web viewer, headless (issue 4: "files open in the viewer").
+"""Does an episode's .rrd open and draw in the Rerun web viewer? A headless screenshot.
 
 No display is needed: the `rerun` CLI (rerun-sdk) hosts its web viewer on 127.0.0.1, the episode's
 folder is served on 127.0.0.1 (with the CORS header the viewer's fetch needs), and a headless
@@ -6,7 +6,7 @@ Chromium with the SwiftShader software rasteriser opens the viewer on the file; 
 seconds the page is captured over the Chrome DevTools protocol.
 
     pip install websocket-client      # the DevTools client; not a hexbench dependency
-    python bench/rerun_web_screenshot.py runs/x/episodes/stairs-5cm-00.rrd --out docs/img/rerun-stairs-episode.png
+    python experiments/rerun_web_screenshot.py runs/x/episodes/stairs-5cm-00.rrd --out docs/img/rerun-stairs-episode.png
 
 Needs `chromium` on PATH (`make browser` installs Debian's).
 """

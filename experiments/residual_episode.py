@@ -1,9 +1,9 @@
-"""One episode of the CPG plus a given residual a_r: the loop the residual probes in bench/ share.
+"""One episode of the CPG plus a given residual a_r: the loop the residual experiments share.
 
 crest_residual.py, exploration_noise.py, residual_steering.py and stall_trace.py each play the
 env in `cpg_residual` mode with a hand-made (or random) a_r instead of a policy; this module plays
-such an episode and reports how it ended. Run them as `python bench/NAME.py`, which puts bench/
-on the import path.
+such an episode through the env's Gymnasium interface and reports how it ended. Run them as
+`python experiments/NAME.py`, which puts experiments/ on the import path.
 """
 
 from __future__ import annotations
@@ -14,7 +14,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from hexbench.suite.rollout import play
 from hexbench.world.env import EnvConfig, HexapodEnv
 from hexbench.world.robot import JOINT_NAMES
 
@@ -38,51 +37,33 @@ class EpisodeEnd:
     yaw_turned_deg: float  # base yaw at the end minus at reset [deg]
 
 
-class _ResidualActor:
-    action_mode = "cpg_residual"
-    camera = None
-
-    def __init__(self, residual: Residual):
-        self.residual = residual
-
-    def reset(self, seed: int) -> None:
-        pass
-
-    def act(self, obs: np.ndarray, step: int) -> np.ndarray:
-        return np.clip(self.residual(obs, step), -1.0, 1.0).astype(np.float32)
-
-
-class _StepHook:
-    """The rollout's recorder interface, used to pass every step to `on_step` and keep the last info."""
-
-    def __init__(self, on_step: StepHook | None, stopped_early: bool):
-        self.callback, self.stopped_early = on_step, stopped_early
-        self.steps, self.info = 0, {"progress_m": 0.0, "lateral_m": 0.0}
-
-    def on_reset(self, env) -> None:
-        self.yaw0_rad = float(env.robot_state.base_rpy_rad[2])
-
-    def on_step(self, env, obs, action, reward, info) -> None:
-        self.steps, self.info = self.steps + 1, info
-        if self.callback is not None:
-            reason = info["end_reason"]
-            self.callback(env, self.steps, reason is not None and not (reason == "step_limit" and self.stopped_early))
-
-
 def play_residual(config: EnvConfig, residual: Residual, seed: int, *, max_steps: int | None = None,
                   on_step: StepHook | None = None) -> EpisodeEnd:
-    """Play one episode (env seed `seed`) with a_t = a_c + eps * residual(obs, step), through the one
-    episode loop (hexbench.suite.rollout.play); stopping at `max_steps` first ends as "running"."""
+    """Play one episode (env seed `seed`) with a_t = a_c + eps * residual(obs, step) under the env's
+    episode rules; stopping at `max_steps` first (below the config's step limit) ends as "running"."""
+    if config.action_mode != "cpg_residual":
+        raise ValueError(f"a residual needs action_mode 'cpg_residual', not {config.action_mode!r}")
     limit = config.max_steps if max_steps is None else min(max_steps, config.max_steps)
     stopped_early = limit < config.max_steps
     env = HexapodEnv(replace(config, max_steps=limit))
-    hook = _StepHook(on_step, stopped_early)
     try:
-        row = play(None, seed, _ResidualActor(residual), recorder=hook, env=env).row
+        obs, _ = env.reset(seed=seed)
+        yaw0_rad = float(env.robot_state.base_rpy_rad[2])
+        steps, info = 0, {"progress_m": 0.0, "lateral_m": 0.0, "end_reason": None}
+        while True:
+            action = np.clip(residual(obs, steps), -1.0, 1.0).astype(np.float32)
+            obs, _, terminated, truncated, info = env.step(action)
+            steps += 1
+            reason = info["end_reason"]
+            done = terminated or truncated
+            if on_step is not None:
+                on_step(env, steps, done and not (reason == "step_limit" and stopped_early))
+            if done:
+                break
         yaw_rad = float(env.robot_state.base_rpy_rad[2])
     finally:
         env.close()
-    running = row["end_reason"] == "step_limit" and stopped_early
-    return EpisodeEnd(end_reason="running" if running else str(row["end_reason"]),
-                      progress_m=float(row["progress_m"]), lateral_m=float(hook.info["lateral_m"]),
-                      steps=row["steps"], yaw_turned_deg=math.degrees(yaw_rad - hook.yaw0_rad))
+    running = info["end_reason"] == "step_limit" and stopped_early
+    return EpisodeEnd(end_reason="running" if running else str(info["end_reason"]),
+                      progress_m=float(info["progress_m"]), lateral_m=float(info["lateral_m"]),
+                      steps=steps, yaw_turned_deg=math.degrees(yaw_rad - yaw0_rad))

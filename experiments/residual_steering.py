@@ -1,7 +1,7 @@
-"""How a residual can steer the CPG's tripod gait (issue 5: why PPO-CPG leaves the rough corridor).
+"""How a residual can steer the CPG's tripod gait (why PPO-CPG leaves the rough corridor).
 
-Every rough-terrain failure of the shipped PPO-CPG is a lateral deviation, so the residual a_r
-has not learned to steer. This plays simple hand-made residuals on flat ground (no observation
+PPO-CPG trained from scratch on rough ground fails held-out episodes by lateral deviation: its
+residual a_r does not steer. This plays simple hand-made residuals on flat ground (no observation
 noise, 900 control steps = 15 s) and prints the yaw turned, the forward progress and the lateral
 offset at the end:
 
@@ -13,7 +13,7 @@ A steering residual of the second kind is a product of a heading signal and the 
 exploration noise that is white at 60 Hz (SB3's default Gaussian policy) averages it out over a
 2 s gait cycle, while state-dependent noise held for a cycle or more (gSDE) produces it.
 
-    python bench/residual_steering.py [--steps 900] [--seed 1]
+    python experiments/residual_steering.py [--steps 900] [--seed 1]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Measure the simulated JetHexa's physical figures quoted in docs/robot.md.
 
-    python bench/robot_facts.py            # prints a table; --json PATH also writes them
+    python experiments/robot_facts.py            # prints a table; --json PATH also writes them
 
 Measured in PyBullet with the default `JetHexaSpec` and `PhysicsConfig`:
   - total mass (sum over all links as PyBullet loaded them);
@@ -18,18 +18,28 @@ from __future__ import annotations
 import argparse
 import gc
 import json
+import tempfile
 import time
+from functools import lru_cache
 
 import numpy as np
 import psutil
 import pybullet as p
 
 from hexbench.world.env import EnvConfig, HexapodEnv
-from hexbench.world.robot import NUM_JOINTS, JetHexaSpec
-from hexbench.world.sim import PhysicsConfig, Simulation, _urdf_file
+from hexbench.world.robot import NUM_JOINTS, JetHexaSpec, urdf_text
+from hexbench.world.sim import PhysicsConfig, Simulation
 from hexbench.world.terrain import FlatTerrain
 
 SPEC = JetHexaSpec()
+
+
+@lru_cache(maxsize=1)
+def urdf_file() -> str:
+    """The robot's URDF (`urdf_text(SPEC)`) in a temporary file: PyBullet loads URDF from files only."""
+    with tempfile.NamedTemporaryFile("w", prefix="jethexa_", suffix=".urdf", delete=False) as f:
+        f.write(urdf_text(SPEC))
+    return f.name
 
 
 def link_masses(client: int, robot: int) -> list[float]:
@@ -61,7 +71,7 @@ def standing() -> dict[str, float]:
 def footprint() -> dict[str, float]:
     c = p.connect(p.DIRECT)
     try:
-        r = p.loadURDF(_urdf_file(SPEC), [0, 0, 1], useFixedBase=True, physicsClientId=c)
+        r = p.loadURDF(urdf_file(), [0, 0, 1], useFixedBase=True, physicsClientId=c)
         feet = []
         for leg in range(6):
             s = p.getLinkState(r, 3 * leg + 2, computeForwardKinematics=True, physicsClientId=c)
@@ -95,7 +105,7 @@ def servo_limits() -> dict[str, float]:
         sim.load(FlatTerrain(), np.random.default_rng(0))
         c = sim.client
         p.removeBody(sim.robot_id, physicsClientId=c)
-        sim.robot_id = r = p.loadURDF(_urdf_file(SPEC), [0, 0, 1.0], useFixedBase=True, physicsClientId=c)
+        sim.robot_id = r = p.loadURDF(urdf_file(), [0, 0, 1.0], useFixedBase=True, physicsClientId=c)
         inst, avg = 0.0, 0.0
         dt = PhysicsConfig().control_dt_s
         prev = sim.state().joint_pos_rad

@@ -1,4 +1,4 @@
-"""Sample efficiency of one method against another (issue 5): env steps to reach a curriculum level.
+"""Sample efficiency of one method against another: env steps to reach a curriculum level.
 
 "The same success on the same terrain level" is read through the paper's curriculum: a run reaches
 level L when one of its envs has made 20 successful arrivals at every level below L (section 4.1).
@@ -7,14 +7,14 @@ the first logged env-step count at which the curriculum level is >= L. A run tha
 is censored: it needed more than its last logged step count, and a ratio built on it is a lower
 bound (printed with ">").
 
-    python bench/sample_efficiency.py --level 6 training/ppo_cpg-rough-seed0-v2 training/ppo-rough-seed0-v2
-    python bench/sample_efficiency.py --level 6 --reference ppo leaderboard/curves/*rough*.csv
+    python experiments/sample_efficiency.py --level 6 --reference ppo \\
+        leaderboard/curves/ppo_cpg-rough-seed{0,1,2}-v4.csv leaderboard/curves/ppo-rough-seed{0,1,2}-v3.csv
 
 Ratio = median steps of the reference method / median steps of each other method (> 1: the other
 method needs fewer env steps). Runs of one method whose configs differ (an ablation) form separate
 groups, labelled by the fields that differ:
 
-    python bench/sample_efficiency.py --level 11 --reference "ppo_cpg{log_std_init=-2.3}" \\
+    python experiments/sample_efficiency.py --level 11 --reference "ppo_cpg{log_std_init=-2.3}" \\
         leaderboard/curves/ppo_cpg-rough-seed{0,1,2}-v4.csv leaderboard/curves/ppo_cpg-rough-seed{0,1}-std05.csv
 
 Progress rows are written once a minute, so a step count is exact

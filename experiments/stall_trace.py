@@ -1,10 +1,10 @@
-"""Where and how the open-loop CPG stalls: a trace of one episode (issue 5, slopes headroom).
+"""Where and how the open-loop CPG stalls: a trace of one episode (slopes headroom levels).
 
 Plays the CPG (cpg_residual mode, a_r = 0) on one terrain level under the env's rules and prints,
 every `--every` control steps and at the end: base x [m] and z [m], pitch [deg], and which legs'
 tibias touch anything (`Sim.foot_contacts`), named as in `hexbench.world.robot.LEG_NAMES`.
 
-    python bench/stall_trace.py --terrain slopes --level 20 --seed 3
+    python experiments/stall_trace.py --terrain slopes --level 20 --seed 3
 """
 
 from __future__ import annotations
