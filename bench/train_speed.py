@@ -1,6 +1,6 @@
 """Training throughput: env steps per second of wall-clock time for PPO and SAC with 1 and 2 workers.
 
-Each case is a fresh `hexbench.training.train.train` run (the real training path: curriculum env with noise,
+Each case is a fresh `hexbench.training.loop.train` run (the real training path: curriculum env with noise,
 Monitor, fixed observation scaling, SB3 learner, our callback) on rough terrain, timed by the run's
 own wall clock (the `learn` call, not start-up). PPO uses baselines/ppo_cpg.py's CONFIG with
 n_steps shortened so every case completes whole rollouts; SAC uses baselines/sac_cpg.py's CONFIG
@@ -22,7 +22,9 @@ import sys
 import tempfile
 from pathlib import Path
 
-from hexbench.training.train import TrainSettings, read_run, train
+from hexbench.training.loop import train
+from hexbench.training.runs import read_run
+from hexbench.training.settings import TrainSettings
 
 REPO = Path(__file__).resolve().parent.parent
 CASES = {  # algo -> (baseline file, config overrides making a short run representative)

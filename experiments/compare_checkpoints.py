@@ -25,8 +25,9 @@ import numpy as np
 from levels import task_between
 
 from hexbench.suite.tasks import load_suite
+from hexbench.training.runs import checkpoint_at, read_run
 from hexbench.training.selection import heldout_seeds
-from hexbench.training.train import TrainError, checkpoint_at, load_baseline_config, read_run
+from hexbench.training.settings import TrainError, load_baseline_config
 
 
 def parse_candidate(text: str) -> tuple[dict, Path, dict]:

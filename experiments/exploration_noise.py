@@ -41,7 +41,7 @@ def gsde_noise(std: float, period: int, rng: np.random.Generator):
     import torch
 
     from hexbench.agents.policy import build_policy, scale_observation
-    from hexbench.training.train import load_baseline_config
+    from hexbench.training.settings import load_baseline_config
 
     torch.manual_seed(int(rng.integers(2**31)))
     config = load_baseline_config(Path(__file__).resolve().parent.parent / "baselines" / "ppo_cpg.py")

@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from hexbench.training.curves import CurvesError, line_styles, load_progress, plot_curves
-from hexbench.training.train import CSV_COLUMNS
+from hexbench.training.runs import CSV_COLUMNS
 
 
 def write_run(folder, method, total_steps, logged_steps):

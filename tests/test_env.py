@@ -1,5 +1,6 @@
 """HexapodEnv behaviour: observation layout and noise, the three action modes, Table 1 rewards with
-the eq. 8 difficulty factor, every way an episode ends, curriculum, and bad input."""
+the eq. 8 difficulty factor, every way an episode ends, the level as reset option, info arrays, and
+bad input. (The training curricula and the early-end penalty are wrappers: test_training_wrappers.py.)"""
 
 from __future__ import annotations
 
@@ -9,16 +10,7 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from hexbench.world.env import (
-    CPG_PARAM_HIGH,
-    CPG_PARAM_LOW,
-    NO_NOISE,
-    OBS_DIM,
-    Curriculum,
-    EnvConfig,
-    HexapodEnv,
-    ObservationNoise,
-)
+from hexbench.world.env import CPG_PARAM_HIGH, CPG_PARAM_LOW, NO_NOISE, OBS_DIM, EnvConfig, HexapodEnv, ObservationNoise
 from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, total_reward
 
 ZERO18 = np.zeros(18, dtype=np.float32)
@@ -317,28 +309,50 @@ def test_no_stall_rule_by_default(make_env) -> None:
     assert EnvConfig(terrain="flat").stall_window_s is None
 
 
-# ---------------------------------------------------------------------------- curriculum
-def test_curriculum_levels_up_after_20_arrivals_and_stops_at_the_top(make_env) -> None:
-    env = make_env(terrain="rough", noise=NO_NOISE, curriculum=Curriculum(12.0, 1.0, 13.0))
-    for arrival in range(45):
-        env.reset(seed=arrival)
-        assert env.sim.terrain.level == env.level
-        expected_delta = difficulty_factor("rough", env.level)
-        teleport(env, env.start_xy[0] + 2.55, env.start_xy[1], z_m=0.3)
-        _, reward, _, _, info = env.step(ZERO18)
-        assert info["end_reason"] == "success"
-        assert reward == pytest.approx(total_reward(info["reward_terms"], TABLE1_WEIGHTS["rough"], expected_delta))
-        assert env.level == (12.0 if arrival < 19 else 13.0)  # 20th arrival levels up; 13 is the cap
+# --------------------------------------------------------------------------------- level
+def test_a_reset_option_sets_the_level_of_that_episode_only(make_env) -> None:
+    env = make_env(terrain="rough", level=6.0, noise=NO_NOISE)
+    _, info = env.reset(seed=0, options={"level": 11.0})
+    assert info["level"] == env.level == env.sim.terrain.level == 11.0
+    _, _, _, _, info = env.step(ZERO18)
+    assert info["level"] == 11.0
+    _, info = env.reset(seed=0)
+    assert info["level"] == env.sim.terrain.level == 6.0
 
 
-def test_curricula_follow_section_4_1() -> None:
-    from hexbench.world.env import CURRICULA
+def test_the_env_has_no_training_options() -> None:
+    from dataclasses import fields
 
-    assert (CURRICULA["rough"].start_level, CURRICULA["rough"].level_step, CURRICULA["rough"].max_level) == (5, 1, 13)
-    assert (CURRICULA["slopes"].start_level, CURRICULA["slopes"].level_step) == (5, 3)
-    assert CURRICULA["slopes"].max_level <= 18
-    assert (CURRICULA["stairs"].start_level, CURRICULA["stairs"].level_step, CURRICULA["stairs"].max_level) == (5, 0.5, 8)
-    assert all(c.successes_per_level == 20 for c in CURRICULA.values())
+    assert not {"curriculum", "early_end_penalty"} & {f.name for f in fields(EnvConfig)}
+
+
+def test_plain_data_keyword_arguments_build_the_nested_configs() -> None:
+    env = HexapodEnv(terrain="flat", noise={"joint_pos_rad": 0.5}, max_steps=10)
+    quiet = HexapodEnv(terrain="flat", noise=None)
+    try:
+        assert env.config.noise == ObservationNoise(joint_pos_rad=0.5) and env.config.max_steps == 10
+        assert quiet.config.noise == NO_NOISE
+    finally:
+        env.close()
+        quiet.close()
+
+
+# -------------------------------------------------------------------------------- info
+@pytest.mark.parametrize("mode", ["joint", "cpg_residual", "cpg_params"])
+def test_info_arrays_are_fresh_writeable_copies_each_step(make_env, mode: str) -> None:
+    env = make_env(action_mode=mode, noise=NO_NOISE)
+    action = np.zeros(env.action_space.shape, np.float32)
+    for seed in (0, 0):  # the second episode replays the CPG's cached trajectory
+        env.reset(seed=seed)
+        _, _, _, _, first = env.step(action)
+        kept = {k: first[k].copy() for k in ("a_c", "a_r", "a_t")}
+        _, _, _, _, second = env.step(action)
+        for key in ("a_c", "a_r", "a_t"):
+            assert first[key] is not second[key] and first[key].flags.writeable, key
+            np.testing.assert_array_equal(first[key], kept[key], err_msg=key)
+        first["a_t"][:] = 99.0  # writing into an info array does not reach the simulation
+        _, _, _, _, third = env.step(action)
+        assert np.all(np.abs(third["a_t"]) < 10)
 
 
 # ------------------------------------------------------------------------------ bad input

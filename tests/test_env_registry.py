@@ -1,4 +1,5 @@
-"""Every registered hexbench id: `gymnasium.make` works and Gymnasium's `check_env` passes with no warnings."""
+"""Every registered hexbench id: `gymnasium.make` works, Gymnasium's `check_env` passes with no warnings,
+the registration is plain data (EnvSpec JSON round trip) with the task's step limit."""
 
 from __future__ import annotations
 
@@ -7,6 +8,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.envs.registration import EnvSpec
 from gymnasium.utils.env_checker import check_env
 
 import hexbench  # noqa: F401  (registers the ids)
@@ -31,6 +33,10 @@ def test_every_suite_level_curriculum_and_flat_is_registered_for_every_mode() ->
     assert "hexbench/Rough-3cm-CpgParams-v1" in IDS
 
 
+# check_env says this of every wrapped env; it is the only warning allowed
+WRAPPED_ENV_NOTICE = ".*is different from the unwrapped version"
+
+
 @pytest.mark.parametrize("env_id", IDS)
 def test_check_env_passes_without_warnings(env_id: str) -> None:
     with warnings.catch_warnings():
@@ -38,11 +44,14 @@ def test_check_env_passes_without_warnings(env_id: str) -> None:
         env = gym.make(env_id)
         try:
             check_env(env.unwrapped, skip_render_check=True)
-            # and through the wrappers gym.make adds (passive checker, order enforcing)
-            obs, info = env.reset(seed=0)
+            with warnings.catch_warnings():  # and the wrapped env gym.make returns (time limit, curriculum)
+                warnings.filterwarnings("ignore", message=WRAPPED_ENV_NOTICE)
+                check_env(env, skip_render_check=True)
+            # and stepping through the wrappers gym.make adds (passive checker, order enforcing, time limit)
+            obs, _ = env.reset(seed=0)
             assert env.observation_space.contains(obs)
             for _ in range(3):
-                obs, reward, terminated, truncated, info = env.step(env.action_space.sample())
+                obs, reward, terminated, truncated, _ = env.step(env.action_space.sample())
                 assert env.observation_space.contains(obs)
                 assert np.isfinite(reward) and isinstance(terminated, bool) and isinstance(truncated, bool)
         finally:
@@ -70,5 +79,44 @@ def test_registered_config_is_the_task_spec() -> None:
         assert cfg.goal_distance_m == 2.5 and cfg.max_lateral_deviation_m == 0.8
         assert cfg.stall_window_s == task.stall_window_s
         assert cfg.eps == 0.3
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_registration_round_trips_through_json_and_makes_a_working_env(env_id: str) -> None:
+    spec = gym.spec(env_id)
+    again = EnvSpec.from_json(spec.to_json())
+    assert again == spec
+    env = gym.make(again)
+    try:
+        obs, _ = env.reset(seed=0)
+        assert env.observation_space.contains(obs)
+        for _ in range(3):
+            obs, reward, *_ = env.step(env.action_space.sample())
+            assert env.observation_space.contains(obs) and np.isfinite(reward)
+    finally:
+        env.close()
+
+
+def test_every_id_has_the_tasks_step_limit() -> None:
+    limits = {task.gym_id(mode): task.max_steps for task in SUITE.all_tasks for mode in ACTION_MODES}
+    for env_id in IDS:
+        spec = gym.spec(env_id)
+        assert spec.max_episode_steps == limits.get(env_id, 4000) == spec.kwargs["max_steps"], env_id
+    assert gym.spec("hexbench/Mixed-2-CpgResidual-v1").max_episode_steps == 8000
+
+
+@pytest.mark.parametrize("env_id", ["hexbench/Rough-8cm-CpgResidual-v1", "hexbench/Slopes-Curriculum-Joint-v1"])
+def test_noise_none_turns_the_observation_noise_off(env_id: str) -> None:
+    from hexbench.world.env import NO_NOISE
+
+    env = gym.make(env_id, noise=None)
+    try:
+        assert env.unwrapped.config.noise == NO_NOISE
+        env.reset(seed=0)
+        obs, *_ = env.step(np.zeros(env.action_space.shape, np.float32))
+        state = env.unwrapped.robot_state
+        np.testing.assert_array_equal(obs[:18], state.joint_pos_rad.astype(np.float32))
     finally:
         env.close()

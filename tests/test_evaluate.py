@@ -188,13 +188,14 @@ def test_two_workers_give_the_same_record_as_one(tmp_path):
     assert one["episodes"] == two["episodes"] and one["levels"] == two["levels"]
 
 
-def test_list_shows_levels_and_every_id():
+def test_list_shows_levels_and_list_ids_every_id():
     from hexbench.suite.tasks import registered_ids
 
-    r = invoke(["list", "--ids"])
-    assert r.exit_code == 0
-    assert "5.5" in r.stdout and "headroom" in r.stdout
-    assert all(i in r.stdout for i in registered_ids())
+    table = invoke(["list"])
+    assert table.exit_code == 0 and "5.5" in table.stdout and "headroom" in table.stdout
+    ids = invoke(["list", "--ids"])
+    assert ids.exit_code == 0 and len(ids.stdout.split()) == len(ids.stdout.splitlines()) == len(registered_ids())
+    assert set(ids.stdout.split()) == set(registered_ids())
 
 
 def test_a_controller_with_a_camera_sees_the_painted_terrain_on_schedule(tmp_path):

@@ -1,14 +1,21 @@
 """Trained-policy controllers: the waypoint a policy sees on a course longer than training's goal."""
 
-import numpy as np
-
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
-from hexbench.agents.policy import (BASE_X_INDEX, OBS_SCALE, TARGET_X_INDEX, PolicyController, deterministic_action,
-                                    load_policy, scale_observation, waypoint_horizon_m)
+from hexbench.agents.policy import (
+    BASE_X_INDEX,
+    OBS_SCALE,
+    TARGET_X_INDEX,
+    PolicyController,
+    deterministic_action,
+    load_policy,
+    scale_observation,
+    waypoint_horizon_m,
+)
 from hexbench.suite.controller import load_controller_module
 from hexbench.suite.tasks import load_suite
 

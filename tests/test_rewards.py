@@ -1,14 +1,17 @@
-"""The training reward option `early_end_penalty`: an early end other than success never pays."""
+"""The training reward option `early_end_penalty` (hexbench.training.wrappers.EarlyEndPenalty): an
+early end other than success never pays."""
 
 import numpy as np
 import pytest
 
+from hexbench.training.wrappers import EarlyEndPenalty, early_end_penalty
 from hexbench.world.env import EnvConfig, HexapodEnv
-from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, early_end_penalty
+from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor
 
 
 def _first_end(penalty: bool, **rules):
-    env = HexapodEnv(EnvConfig(terrain="rough", level=7, early_end_penalty=penalty, **rules))
+    env = HexapodEnv(EnvConfig(terrain="rough", level=7, **rules))
+    env = EarlyEndPenalty(env) if penalty else env
     env.reset(seed=5)
     try:
         for _ in range(600):

@@ -1,6 +1,5 @@
 """The task suite as data: levels, seeds, selection errors."""
 
-from dataclasses import replace
 
 import pytest
 
@@ -43,16 +42,6 @@ def test_unknown_terrain_lists_valid_ones():
 def test_unknown_level_lists_valid_ones():
     with pytest.raises(ValueError, match=r"unknown level 4\.2; valid levels: stairs: 2, 3, 4, 5, 5\.5"):
         load_suite("v1").select(["stairs"], [4.2])
-
-
-def test_task_between_levels_takes_the_next_suite_levels_rules():
-    suite = load_suite("v1")
-    between = suite.task_between("slopes", 19.5)
-    assert between.level == 19.5 and between.seeds(2) == [episode_seed("v1", "slopes", 19.5, i) for i in range(2)]
-    assert between.env_config("cpg_residual") == replace(suite.task("slopes", 20).env_config("cpg_residual"), level=19.5)
-    assert suite.task_between("slopes", 20) == suite.task("slopes", 20)
-    with pytest.raises(ValueError, match="valid levels: .*24.*below the top"):
-        suite.task_between("slopes", 25)
 
 
 def test_unknown_protocol_lists_valid_ones():

@@ -10,7 +10,7 @@ import pybullet as p
 import pytest
 
 from hexbench.suite.tasks import load_suite
-from hexbench.world.env import CURRICULA
+from hexbench.training.wrappers import CURRICULA
 from hexbench.world.terrain import (
     COURSE_END_X_M,
     COURSE_HALF_WIDTH_M,

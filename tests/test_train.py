@@ -79,7 +79,7 @@ def test_ppo_cpg_smoke_run_writes_checkpoint_csv_and_resumes(tmp_path):
 
 
 def test_reward_normaliser_statistics_are_checkpointed_and_restored(tmp_path):
-    from hexbench.training.train import make_vec_env, restore_reward_normalizer
+    from hexbench.training.envs import make_vec_env, restore_reward_normalizer
 
     out = tmp_path / "run"
     assert train_tiny("ppo_cpg", out, steps=64).exit_code == 0
@@ -445,3 +445,14 @@ def test_resume_restores_each_envs_curriculum_level(tmp_path):
     assert run["curriculum"] == [{"level": 8.0, "successes": 3}]
     last_row = (out / "progress.csv").read_text().splitlines()[-1].split(",")
     assert last_row[0] == "128" and last_row[6] == "8"
+
+
+def test_training_errors_are_hexbench_errors():
+    from hexbench.errors import HexbenchError
+    from hexbench.training.curves import CurvesError
+    from hexbench.training.selection import SelectionError
+    from hexbench.training.settings import TrainError
+    from hexbench.training.sweep import SweepError
+
+    for error in (TrainError, SelectionError, SweepError, CurvesError, ConfigError):
+        assert issubclass(error, HexbenchError), error

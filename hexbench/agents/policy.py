@@ -1,7 +1,7 @@
 """Trained baseline policies: baseline configs, observation scaling, verified checkpoints, controllers.
 
 A baseline file (baselines/*.py) defines a frozen config dataclass at its top and `CONFIG = Config()`.
-Every config has these fields, read here and by hexbench.training.train:
+Every config has these fields, read here and by hexbench.training (settings, envs, warm_start):
 
     algo           "ppo", "sac" or "td3" (the Stable-Baselines3 class)
     action_mode    "joint", "cpg_residual" or "cpg_params" (see hexbench.world.env)
@@ -10,7 +10,7 @@ Every config has these fields, read here and by hexbench.training.train:
     residual_scale eps of eq. 6 (None: the terrain default of paper 3.2)
     log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
     action_noise_std (optional; TD3, SAC) std of Gaussian exploration noise added to actions
-    initial_action (optional; PPO) the policy's mean action before training (hexbench.training.train)
+    initial_action (optional; PPO) the policy's mean action before training (hexbench.training.warm_start)
 
 and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
 
@@ -22,7 +22,7 @@ Checkpoints. Nothing is unpickled from a file whose sha256 was not checked first
     load_data=False)`, which reads tensors with `torch.load(weights_only=True)` and skips the
     cloudpickled "data" entry altogether. The network is rebuilt from the baseline's config.
   * training checkpoints (full SB3 models, for resuming) are verified against the run's own
-    run.json before `ALGO.load` (see hexbench.training.train).
+    run.json before `ALGO.load` (see hexbench.training.envs).
 """
 
 from __future__ import annotations

@@ -28,8 +28,9 @@ def register(app: typer.Typer) -> None:
         from rich.progress import Progress
         from rich.table import Table
 
+        from hexbench.errors import HexbenchError
+        from hexbench.training.settings import TrainError, parse_override
         from hexbench.training.sweep import PAPER_EPS, EpsilonSweep, best_eps, run_sweep
-        from hexbench.training.train import TrainError, parse_override
 
         console = Console(stderr=True)
         try:
@@ -50,7 +51,7 @@ def register(app: typer.Typer) -> None:
             try:
                 rows = run_sweep(spec, "hexbench " + shlex.join(sys.argv[1:]),
                                  progress_callback=lambda row: progress.advance(task))
-            except TrainError as e:
+            except HexbenchError as e:
                 typer.secho(f"error: {e}", fg="red", err=True)
                 raise typer.Exit(2) from None
         best, means = best_eps(rows)
@@ -74,11 +75,12 @@ def register(app: typer.Typer) -> None:
         """Plot eps sweeps (score against eps, best and paper's eps marked); copy their CSVs beside the PNG."""
         from rich.console import Console
 
-        from hexbench.training.sweep import SweepError, plot_sweeps
+        from hexbench.errors import HexbenchError
+        from hexbench.training.sweep import plot_sweeps
 
         try:
             written = plot_sweeps(sources, out)
-        except SweepError as e:
+        except HexbenchError as e:  # SweepError, OutputError
             typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         Console().print("wrote " + ", ".join(str(p) for p in written), soft_wrap=True)

@@ -1,4 +1,5 @@
-"""`hexbench train FILE --terrain T`: train a baseline file on a terrain's curriculum (hexbench.training.train)."""
+"""`hexbench train FILE --terrain T`: train a baseline file on a terrain's curriculum (hexbench.training.loop);
+`hexbench checkpoints publish|select|verify` and `hexbench curves`."""
 
 from __future__ import annotations
 
@@ -31,7 +32,9 @@ def register(app: typer.Typer) -> None:
         """Train a baseline (PPO/SAC/TD3 per its CONFIG) on the paper's curriculum; resumes a run."""
         from rich.console import Console
 
-        from hexbench.training.train import TrainError, TrainSettings, parse_curriculum, parse_override, train
+        from hexbench.errors import HexbenchError
+        from hexbench.training.loop import train
+        from hexbench.training.settings import TrainSettings, parse_curriculum, parse_override
 
         err = Console(stderr=True)
         try:
@@ -45,7 +48,7 @@ def register(app: typer.Typer) -> None:
                 value_warmup_steps=value_warmup,
             )
             run = train(settings)
-        except TrainError as e:
+        except HexbenchError as e:
             typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         last = run["checkpoints"][-1] if run["checkpoints"] else None
@@ -66,12 +69,13 @@ def register(app: typer.Typer) -> None:
         """Copy a run's checkpoint (policy weights only) into baselines/checkpoints/ with its manifest entry."""
         from rich.console import Console
 
-        from hexbench.training.train import TrainError, publish_checkpoint
+        from hexbench.errors import HexbenchError
+        from hexbench.training.publish import publish_checkpoint
 
         console = Console(stderr=True)
         try:
             entry = publish_checkpoint(run_dir, dest, which)
-        except TrainError as e:
+        except HexbenchError as e:
             typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         console.print(f"published {dest / entry['file']} ({entry['status']}; sha256 {entry['sha256'][:12]}...)",
@@ -154,12 +158,13 @@ def register(app: typer.Typer) -> None:
         """Plot episode reward, success rate and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
         from rich.console import Console
 
-        from hexbench.training.curves import CurvesError, plot_curves
+        from hexbench.errors import HexbenchError
+        from hexbench.training.curves import plot_curves
 
         console = Console(stderr=True)
         try:
             written = plot_curves(sources, out, title, copy_csv, max_env_steps)
-        except (CurvesError, OSError, ValueError) as e:
+        except (HexbenchError, OSError, ValueError) as e:  # CurvesError, OutputError; pandas' parse errors
             typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None
         for path in written:

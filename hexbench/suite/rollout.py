@@ -76,8 +76,7 @@ def play(task, seed: int, actor, *, index: int = 0, controller_seed: int | None 
          max_steps: int | None = None, where: str = "controller", env=None, **env_overrides) -> Episode:
     """Play one episode of `task` from episode seed `seed` with `actor`; return its row and actions.
 
-    `env` plays in a prebuilt environment instead of the task's (then `task` may be None: the row
-    names the env config's terrain and level); the caller closes it.
+    `env` plays in a prebuilt environment of the task instead of a fresh one; the caller closes it.
     `controller_seed` is what the actor's reset() receives (the evaluator passes a seed derived from
     the episode seed and a per-run secret, never the episode seed itself). `recorder` gets
     on_reset / on_step / on_end (hexbench.recording). A ControllerError or ReplayMismatch ends the
@@ -86,7 +85,7 @@ def play(task, seed: int, actor, *, index: int = 0, controller_seed: int | None 
     own_env = env is None
     env = env or make_env(task, actor.action_mode, max_steps, **env_overrides)
     cfg = env.config
-    terrain, level = (task.terrain, task.level) if task is not None else (cfg.terrain, cfg.level)
+    terrain, level = task.terrain, task.level
     try:
         obs, _ = env.reset(seed=seed)
         if recorder is not None:

@@ -8,9 +8,12 @@ as an unsigned integer, so they never depend on run order or on any global state
 Gymnasium ids (registered on `import hexbench`):
   hexbench/<Terrain>-<level><unit>-<Mode>-v1    every suite level x action mode, protocol rules
                                                 (the mixed course too: hexbench/Mixed-<level>-<Mode>-v1)
-  hexbench/<Terrain>-Curriculum-<Mode>-v1       training curriculum of paper 4.1 (no stall rule)
+  hexbench/<Terrain>-Curriculum-<Mode>-v1       training curriculum of paper 4.1 (no stall rule),
+                                                made by hexbench.training.wrappers:make_curriculum_env
   hexbench/Flat-<Mode>-v1                       flat ground, for sanity checks
-with <Mode> one of Joint, CpgResidual, CpgParams.
+with <Mode> one of Joint, CpgResidual, CpgParams. Registrations carry plain data (EnvConfig fields
+as JSON-able kwargs, so EnvSpec.to_json / from_json round-trip) and the episode's step limit as
+`max_episode_steps`.
 """
 
 from __future__ import annotations
@@ -18,12 +21,12 @@ from __future__ import annotations
 import hashlib
 import os
 import sys
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
 
 from hexbench.artifacts.provenance import REPO_ROOT
-from hexbench.world.env import ACTION_MODES, CURRICULA, EnvConfig
+from hexbench.world.env import ACTION_MODES, MAX_EPISODE_STEPS, EnvConfig
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -33,6 +36,9 @@ else:  # pragma: no cover
 DEFAULT_PROTOCOL = "v1"
 MODE_IDS: dict[str, str] = {"joint": "Joint", "cpg_residual": "CpgResidual", "cpg_params": "CpgParams"}
 PROTOCOL_TERRAINS: tuple[str, ...] = ("rough", "slopes", "stairs")
+CURRICULUM_TERRAINS: tuple[str, ...] = ("rough", "slopes", "stairs")  # hexbench.training.wrappers.CURRICULA
+ENV_ENTRY_POINT = "hexbench.world.env:HexapodEnv"
+CURRICULUM_ENTRY_POINT = "hexbench.training.wrappers:make_curriculum_env"
 
 
 def tasks_dir() -> Path:
@@ -77,13 +83,15 @@ class TaskSpec:
         n = self.episodes if episodes is None else episodes
         return [episode_seed(self.protocol, self.terrain, self.level, i) for i in range(n)]
 
+    def env_kwargs(self, action_mode: str) -> dict:
+        """The EnvConfig fields of this task in one action mode, as plain (JSON-able) data."""
+        return {"terrain": self.terrain, "level": self.level, "action_mode": action_mode, "max_steps": self.max_steps,
+                "goal_distance_m": self.goal_distance_m, "max_lateral_deviation_m": self.max_lateral_deviation_m,
+                "fall_tilt_deg": self.fall_tilt_deg, "stall_window_s": self.stall_window_s,
+                "stall_min_progress_m": self.stall_min_progress_m}
+
     def env_config(self, action_mode: str, **overrides) -> EnvConfig:
-        return EnvConfig(
-            terrain=self.terrain, level=self.level, action_mode=action_mode, max_steps=self.max_steps,
-            goal_distance_m=self.goal_distance_m, max_lateral_deviation_m=self.max_lateral_deviation_m,
-            fall_tilt_deg=self.fall_tilt_deg, stall_window_s=self.stall_window_s,
-            stall_min_progress_m=self.stall_min_progress_m, **overrides,
-        )
+        return EnvConfig(**self.env_kwargs(action_mode), **overrides)
 
     def gym_id(self, action_mode: str) -> str:
         return f"hexbench/{self.terrain.capitalize()}-{format_level(self.level)}{self.unit}-{MODE_IDS[action_mode]}-{self.protocol}"
@@ -126,18 +134,6 @@ class Suite:
                 return t
         valid = ", ".join(format_level(v) for v in self.levels(terrain))
         raise ValueError(f"unknown {terrain} level {format_level(level)}; valid levels: {valid}")
-
-    def task_between(self, terrain: str, level: float) -> TaskSpec:
-        """A diagnostic task at any level up to the terrain's top, e.g. slopes 19.5 deg: a suite level's
-        own task, else the next suite level up with this level (its rules, seeds derived from this level).
-        Never scored; for probing thresholds between suite levels (bench/compare_checkpoints.py)."""
-        try:
-            return self.task(terrain, level)
-        except ValueError as e:
-            above = [t for t in self.all_tasks if t.terrain == terrain and t.level > float(level)]
-            if not above:
-                raise ValueError(f"{e} (or any level below the top)") from None
-            return replace(min(above, key=lambda t: t.level), level=float(level))
 
     def select(self, terrains: list[str] | None = None, levels: list[float] | None = None) -> list[TaskSpec]:
         """Tasks of the given terrains (default: the full run's) and levels (default all of each terrain).
@@ -185,11 +181,6 @@ def load_suite(protocol: str = DEFAULT_PROTOCOL) -> Suite:
     return Suite(protocol, tuple(t for t in tasks if t.in_full_run), tuple(t for t in tasks if not t.in_full_run))
 
 
-def curriculum_config(terrain: str, action_mode: str, **overrides) -> EnvConfig:
-    """The training environment of paper 4.1 for a terrain (curriculum, noise, no stall rule)."""
-    return EnvConfig(terrain=terrain, action_mode=action_mode, curriculum=CURRICULA[terrain], **overrides)
-
-
 def registered_ids() -> list[str]:
     import gymnasium as gym
 
@@ -200,17 +191,16 @@ def register_envs(protocol: str = DEFAULT_PROTOCOL) -> None:
     """Register every suite task x action mode, the curricula and flat ground with Gymnasium."""
     import gymnasium as gym
 
-    entry = "hexbench.world.env:HexapodEnv"
+    def register(gid: str, entry_point: str, kwargs: dict, max_episode_steps: int) -> None:
+        if gid not in gym.registry:
+            gym.register(gid, entry_point=entry_point, kwargs=kwargs, max_episode_steps=max_episode_steps)
+
     for mode in ACTION_MODES:
         m = MODE_IDS[mode]
         for task in load_suite(protocol).all_tasks:
-            gid = task.gym_id(mode)
-            if gid not in gym.registry:
-                gym.register(gid, entry_point=entry, kwargs={"config": task.env_config(mode)})
-        for terrain in CURRICULA:
-            gid = f"hexbench/{terrain.capitalize()}-Curriculum-{m}-{protocol}"
-            if gid not in gym.registry:
-                gym.register(gid, entry_point=entry, kwargs={"config": curriculum_config(terrain, mode)})
-        gid = f"hexbench/Flat-{m}-{protocol}"
-        if gid not in gym.registry:
-            gym.register(gid, entry_point=entry, kwargs={"config": EnvConfig(terrain="flat", action_mode=mode)})
+            register(task.gym_id(mode), ENV_ENTRY_POINT, task.env_kwargs(mode), task.max_steps)
+        for terrain in CURRICULUM_TERRAINS:
+            register(f"hexbench/{terrain.capitalize()}-Curriculum-{m}-{protocol}", CURRICULUM_ENTRY_POINT,
+                     {"terrain": terrain, "action_mode": mode, "max_steps": MAX_EPISODE_STEPS}, MAX_EPISODE_STEPS)
+        register(f"hexbench/Flat-{m}-{protocol}", ENV_ENTRY_POINT,
+                 {"terrain": "flat", "action_mode": mode, "max_steps": MAX_EPISODE_STEPS}, MAX_EPISODE_STEPS)

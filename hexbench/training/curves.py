@@ -21,7 +21,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from hexbench.training.train import CSV_COLUMNS
+from hexbench.artifacts.files import atomic_path, write_json_atomic
+from hexbench.errors import HexbenchError
+from hexbench.training.runs import CSV_COLUMNS
 
 LEGEND_LINE_CHARS = 120  # run labels wrap at this many characters
 LEGEND_LINE_IN = 0.13  # height of one legend line at font size 7 [inch]
@@ -34,7 +36,7 @@ SEED_LINESTYLES: tuple[str, ...] = ("-", "--", ":", "-.")
 EXTRA_COLOURS: tuple[str, ...] = ("C7", "C8", "C9", "black", "olive", "teal")
 
 
-class CurvesError(Exception):
+class CurvesError(HexbenchError):
     """A run or CSV cannot be plotted; the message is one line."""
 
 
@@ -69,7 +71,7 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
         agg = agg[agg["env_steps"] <= max_env_steps].reset_index(drop=True)
     if run:
         # the run directory's name (or its CSV copy's stem): runs of one method, terrain and seed
-        # under different configs (docs/training.md: v2, v3, v4) stay apart in the legend
+        # under different config revisions (docs/changelog.md: -v2, -v3, -v4) stay apart in the legend
         label = source.resolve().name if source.is_dir() else source.stem
         cfg = run.get("config") or {}
         if cfg.get("log_std_init") is not None:
@@ -86,7 +88,7 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
             c = run["curriculum_levels"]
             label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
         if not cfg.get("early_end_penalty", False):
-            label += ", no early-end penalty"  # the first runs' reward (docs/training.md)
+            label += ", no early-end penalty"  # the reward of Table 1 as written (docs/training.md)
         total = run.get("total_steps", 0)
         last = max(run.get("env_steps", 0), last_logged)
         if max_env_steps is None and (run.get("env_steps", 0) < total or last_logged < total):
@@ -106,15 +108,11 @@ def save_png(fig, out_png: Path) -> Path:
 
     out_png = Path(out_png)
     out_png.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out_png.with_name(out_png.stem + ".tmp.png")
     try:
-        fig.savefig(tmp, dpi=110)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+        with atomic_path(out_png) as tmp:
+            fig.savefig(tmp, dpi=110)
     finally:
         plt.close(fig)
-    tmp.replace(out_png)
     return out_png
 
 
@@ -202,6 +200,6 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
                 summary["command"] = run["sessions"][0]["command"] if run.get("sessions") else run.get("command")
                 summary["partial"] = run.get("env_steps", 0) < run.get("total_steps", 0)
                 side = dest.with_suffix(".run.json")
-                side.write_text(json.dumps(summary, indent=2) + "\n")
+                write_json_atomic(side, summary)
                 written += [dest, side]
     return written

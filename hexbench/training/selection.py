@@ -28,19 +28,23 @@ from pathlib import Path
 
 import numpy as np
 
+from hexbench.errors import HexbenchError
+from hexbench.training.runs import read_run
+from hexbench.training.settings import TrainError, load_baseline_config
+
 HELDOUT_NAMESPACE = "heldout"
 SELECTION_FILE = "selection.json"
 SAVE_EVERY_S = 60.0  # selection.json is rewritten at least this often during a long selection
 # Per terrain, two levels where the open-loop CPG's success falls off (leaderboard/cpg.json): rough and
 # stairs in the upper half of paper Table 4; on slopes the CPG passes every Table 4 level, so its top
-# level and the 18 deg headroom level (CPG 85%). And one easy level: the first selections used only
-# the hard two and shipped a stairs policy that passes 8 cm but drifts out of the corridor on 2 cm
-# steps in 5 of 20 protocol episodes (the open-loop CPG: 0 of 20).
+# level and the 18 deg headroom level (CPG 85%). And one easy level: selecting on the hard two alone
+# chose a stairs policy that passes 8 cm but drifts out of the corridor on 2 cm steps in 5 of 20
+# protocol episodes (the open-loop CPG: 0 of 20).
 SELECTION_LEVELS: dict[str, tuple[float, ...]] = {"rough": (5.0, 9.0, 11.0), "slopes": (10.0, 15.0, 18.0),
                                                   "stairs": (3.0, 7.0, 8.0)}
 
 
-class SelectionError(Exception):
+class SelectionError(HexbenchError):
     """Bad selection input (run directory, levels); the message is one line."""
 
 
@@ -59,8 +63,6 @@ def heldout_seeds(terrain: str, level: float, episodes: int) -> list[int]:
 
 def _run_config(run: dict):
     """The baseline CONFIG a run was trained with (its file's dataclass, with the run's values)."""
-    from hexbench.training.train import TrainError, load_baseline_config
-
     try:
         base = load_baseline_config(Path(run["baseline_file"]))
     except TrainError as e:
@@ -69,38 +71,36 @@ def _run_config(run: dict):
     return replace(base, **values)
 
 
-def play_episode(policy, config, terrain: str, level: float, seed: int, between_levels: bool = False) -> EpisodeOutcome:
+def play_episode(policy, config, terrain: str, level: float, seed: int) -> EpisodeOutcome:
     """One deterministic episode of `policy` under the protocol's rules at (terrain, level), through the
-    one episode loop (hexbench.suite.rollout); with `between_levels`, a level between suite levels plays
-    under the next one's rules (Suite.task_between)."""
+    one episode loop (hexbench.suite.rollout)."""
     from hexbench.agents.policy import PolicyController
     from hexbench.suite.rollout import LocalActor, play
     from hexbench.suite.tasks import load_suite
 
     suite = load_suite()
-    task = suite.task_between(terrain, level) if between_levels else suite.task(terrain, level)
+    task = suite.task(terrain, level)
     actor = LocalActor(PolicyController(config.action_mode, policy))
     row = play(task, seed, actor, where="policy", residual_scale=config.residual_scale).row
     return EpisodeOutcome(row["success"], float(row["progress_m"]), row["end_reason"])
 
 
 def score_job(job: tuple) -> tuple[str, float, int, dict]:
-    """One held-out episode: job = (run.json dict, run directory, checkpoint entry, level, seed[,
-    between_levels]); returns (checkpoint sha256, level, seed, outcome or {"error": one line})."""
+    """One held-out episode: job = (run.json dict, run directory, checkpoint entry, level, seed);
+    returns (checkpoint sha256, level, seed, outcome or {"error": one line})."""
     import torch
 
     from hexbench.agents.policy import load_policy
     from hexbench.artifacts.manifest import CheckpointError
 
     torch.set_num_threads(1)
-    run, run_dir, ckpt, level, seed, *options = job
-    between_levels = bool(options and options[0])
+    run, run_dir, ckpt, level, seed = job
     config = _run_config(run)
     try:
         policy = load_policy(config, Path(run_dir) / ckpt["file"], ckpt["sha256"])
     except CheckpointError as e:
         return ckpt["sha256"], level, seed, {"error": str(e)}
-    out = play_episode(policy, config, run["terrain"], level, seed, between_levels)
+    out = play_episode(policy, config, run["terrain"], level, seed)
     return ckpt["sha256"], level, seed, {"success": out.success, "progress_m": round(out.progress_m, 4),
                                          "end_reason": out.end_reason}
 
@@ -136,7 +136,6 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
     RUN_DIR/selection.json are kept (a change of levels starts afresh). Returns the table it writes.
     """
     from hexbench.suite.tasks import load_suite
-    from hexbench.training.train import read_run
 
     run_dir = Path(run_dir)
     run = read_run(run_dir)
@@ -167,12 +166,25 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         window = " and ".join(f"{op} {n}" for op, n in ((">=", min_env_steps), ("<=", max_env_steps)) if n is not None)
         raise SelectionError(f"{run_dir}: no checkpoint at {window} env steps "
                              f"(checkpoints run from {ckpts[0]['env_steps']} to {ckpts[-1]['env_steps']})")
-    ckpts = in_window
+    chosen = _chosen(run_dir, in_window, stride, top, table)
+    jobs = []
+    for c in chosen:
+        have = {(e["level"], e["seed"]) for e in scores.get(c["sha256"], {}).get("episodes", [])}
+        jobs += [(run, str(run_dir), c, lv, seed) for lv in levels for seed in heldout_seeds(terrain, lv, episodes)
+                 if (lv, seed) not in have]
+        scores.setdefault(c["sha256"], {"file": c["file"], "env_steps": c["env_steps"], "episodes": []})
+    _play(jobs, f"held-out episodes ({len(chosen)} checkpoints)", workers, progress, path, table, run)
+    _save(path, table, run)
+    return table
+
+
+def _chosen(run_dir: Path, ckpts: list[dict], stride: int, top: int | None, table: dict) -> list[dict]:
+    """Every `stride`-th checkpoint and the last; with `top`, the `top` best-scored of those; all with files."""
     chosen = ckpts[::stride]
     if chosen[-1] is not ckpts[-1]:
         chosen.append(ckpts[-1])
     if top is not None:
-        ranked = sorted((c for c in chosen if c["sha256"] in scores),
+        ranked = sorted((c for c in chosen if c["sha256"] in table["checkpoints"]),
                         key=lambda c: rank_key(table, c["sha256"]), reverse=True)
         chosen = ranked[:top]
     absent = [c for c in chosen if not (run_dir / c["file"]).is_file()]
@@ -181,17 +193,16 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         where = f"files exist for {present[0]} to {present[-1]} env steps" if present else "no checkpoint file exists"
         raise SelectionError(f"{run_dir}: {len(absent)} chosen checkpoint(s) have no file (first: {absent[0]['file']}); "
                              f"{where}: choose them with --min-env-steps / --max-env-steps")
-    jobs = []
-    for c in chosen:
-        have = {(e["level"], e["seed"]) for e in scores.get(c["sha256"], {}).get("episodes", [])}
-        jobs += [(run, str(run_dir), c, lv, seed) for lv in levels for seed in heldout_seeds(terrain, lv, episodes)
-                 if (lv, seed) not in have]
-        scores.setdefault(c["sha256"], {"file": c["file"], "env_steps": c["env_steps"], "episodes": []})
+    return chosen
 
+
+def _play(jobs: list[tuple], title: str, workers: int, progress: bool, path: Path, table: dict, run: dict) -> None:
+    """Play the jobs' episodes (in `workers` processes) into the table, saving it every SAVE_EVERY_S."""
     from rich.progress import Progress
 
+    scores = table["checkpoints"]
     with Progress(disable=not progress, transient=True) as bar:
-        task = bar.add_task(f"held-out episodes ({len(chosen)} checkpoints)", total=len(jobs))
+        task = bar.add_task(title, total=len(jobs))
         if workers == 1:
             outcomes, pool = map(score_job, jobs), None
         else:
@@ -210,8 +221,6 @@ def select(run_dir: Path, *, episodes: int = 3, levels: tuple[float, ...] | None
         finally:
             if pool is not None:
                 pool.terminate()
-    _save(path, table, run)
-    return table
 
 
 def _save(path: Path, table: dict, run: dict) -> None:

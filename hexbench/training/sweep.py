@@ -2,7 +2,7 @@
 
 The paper trains PPO-CPG at the terrain's hardest curriculum level for 10 trials of 100,000 steps
 at each eps in {0, 0.1, ..., 1} and keeps the eps with the highest average reward (0.6 rough, 0.4
-slopes, 0.3 stairs). Here each (eps, trial) is one ordinary training run (hexbench.training.train) with
+slopes, 0.3 stairs). Here each (eps, trial) is one ordinary training run (hexbench.training.loop) with
 `residual_scale=eps` at the level `CURRICULA[terrain].max_level`, no curriculum, seed = trial index;
 the score of a trial is its mean reward per env step over the whole trial (well defined even when a
 short trial finishes few 4000-step episodes); the mean episode reward of its last 20 episodes is
@@ -24,8 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.training.train import TRAIN_TERRAINS, TrainError, TrainSettings, read_run, train
-from hexbench.world.env import CURRICULA
+from hexbench.artifacts.files import atomic_path
+from hexbench.errors import HexbenchError
+from hexbench.training.loop import train
+from hexbench.training.runs import read_run
+from hexbench.training.settings import TRAIN_TERRAINS, TrainError, TrainSettings
+from hexbench.training.wrappers import CURRICULA
 
 SWEEP_COLUMNS = ("terrain", "eps", "trial", "seed", "level", "env_steps", "wall_time_s", "mean_step_reward",
                  "mean_episode_reward", "episodes", "success_rate")
@@ -79,13 +83,10 @@ def run_sweep(sweep: EpsilonSweep, command: str = "", progress_callback=None) ->
                          "episodes": last.get("episodes"), "success_rate": last.get("success_rate")})
             if progress_callback:
                 progress_callback(rows[-1])
-    path = sweep.folder / "epsilon.csv"
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "w", newline="") as f:
+    with atomic_path(sweep.folder / "epsilon.csv") as tmp, open(tmp, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=SWEEP_COLUMNS)
         w.writeheader()
         w.writerows({k: ("" if v is None else v) for k, v in r.items()} for r in rows)
-    tmp.replace(path)
     return rows
 
 
@@ -101,7 +102,7 @@ def best_eps(rows: list[dict]) -> tuple[float, dict[float, float]]:
     return max(means, key=means.get), means
 
 
-class SweepError(Exception):
+class SweepError(HexbenchError):
     """A sweep result cannot be read or plotted; the message is one line."""
 
 

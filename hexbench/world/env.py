@@ -16,19 +16,24 @@ Action modes (all Box(-1, 1) so every learner sees a normalised space):
 Episode end: the rules of hexbench.world.protocol (fall, |y| > 0.8 m, success at 2.5 m ahead, an
 optional stall rule that the evaluation protocol turns on, all `terminated`; or the
 4000-step limit, `truncated`. Control runs at 60 Hz (4 physics steps of 1/240 s).
+
+Level: every episode plays at `EnvConfig.level`, or at the level given as reset option
+(`env.reset(options={"level": 7.0})`).
+The env takes its config as an `EnvConfig` or as keyword arguments of plain data (what Gymnasium
+registrations carry): nested configs as dicts of their fields, `noise=None` for no observation noise.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import gymnasium as gym
 import numpy as np
 
 from hexbench.world.cpg import CPGParams, HopfCPG
 from hexbench.world.protocol import EpisodeJudge, EpisodeRules
-from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, early_end_penalty, reward_terms, total_reward
+from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, reward_terms, total_reward
 from hexbench.world.robot import NUM_JOINTS, JetHexaSpec
 from hexbench.world.sim import PhysicsConfig, Simulation, _clip
 from hexbench.world.terrain import TERRAIN_KINDS, make_terrain
@@ -64,6 +69,7 @@ _OBS_FROM_STATE = np.r_[0:57, 61:64]
 _NOISE_BLOCK_STEPS = 32
 _add_reduce = np.add.reduce
 END_REASONS: tuple[str, ...] = ("success", "lateral_deviation", "fall", "stalled", "step_limit")
+MAX_EPISODE_STEPS = 4000  # control steps [1/60 s] of an episode unless a task says otherwise
 
 
 @dataclass(frozen=True)
@@ -88,36 +94,17 @@ NO_NOISE = ObservationNoise(0.0, 0.0, 0.0, 0.0, 0.0)
 
 
 @dataclass(frozen=True)
-class Curriculum:
-    """Training curriculum (paper 4.1): level up after `successes_per_level` arrivals."""
-
-    start_level: float
-    level_step: float
-    max_level: float
-    successes_per_level: int = 20
-
-
-CURRICULA: dict[str, Curriculum] = {
-    "rough": Curriculum(5.0, 1.0, 13.0),
-    "slopes": Curriculum(5.0, 3.0, 18.0),  # 5, 8, 11, 14, 17 (the paper caps at 18)
-    "stairs": Curriculum(5.0, 0.5, 8.0),
-}
-
-
-@dataclass(frozen=True)
 class EnvConfig:
     terrain: str
-    level: float = 0.0  # paper units: cm (rough, stairs), deg (slopes); ignored with a curriculum
+    level: float = 0.0  # paper units: cm (rough, stairs), deg (slopes); a reset option may give another
     action_mode: str = "cpg_residual"
     residual_scale: float | None = None  # eps; None -> DEFAULT_RESIDUAL_SCALE[terrain]
-    curriculum: Curriculum | None = None
     noise: ObservationNoise = field(default_factory=ObservationNoise)
-    max_steps: int = 4000
+    max_steps: int = MAX_EPISODE_STEPS
     goal_distance_m: float = 2.5
     max_lateral_deviation_m: float = 0.8
     fall_tilt_deg: float = 60.0
     stall_window_s: float | None = None  # None: no stall rule
-    early_end_penalty: bool = False  # training option, see hexbench.world.rewards.early_end_penalty
     stall_min_progress_m: float = 0.05
     init_xy_jitter_m: float = 0.02  # uniform +- start position perturbation
     init_yaw_jitter_rad: float = 0.05  # uniform +- start heading perturbation
@@ -136,17 +123,36 @@ class EnvConfig:
         return DEFAULT_RESIDUAL_SCALE[self.terrain] if self.residual_scale is None else self.residual_scale
 
 
+# EnvConfig fields that hold a dataclass: given as plain data (a dict of its fields) they are built here,
+# so that Gymnasium registrations carry JSON-able kwargs (EnvSpec.to_json / from_json)
+_NESTED_CONFIGS = {"noise": ObservationNoise, "physics": PhysicsConfig, "robot": JetHexaSpec, "cpg": CPGParams}
+
+
+def config_fields(values: dict) -> dict:
+    """EnvConfig fields from keyword arguments that may be plain data: a dict for a nested config
+    (ObservationNoise, PhysicsConfig, ...), `noise=None` for no observation noise (NO_NOISE)."""
+    out = dict(values)
+    for name, cls in _NESTED_CONFIGS.items():
+        value = out.get(name)
+        if name == "noise" and name in out and value is None:
+            out[name] = NO_NOISE
+        elif isinstance(value, dict):
+            out[name] = cls(**value)
+    return out
+
+
 class HexapodEnv(gym.Env):
     """JetHexa locomotion on one terrain family (see module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 60}
 
     def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **overrides):
+        """`config`, or EnvConfig fields as keyword arguments (plain data too: see config_fields), or both:
+        the keyword arguments then replace fields of `config`."""
+        overrides = config_fields(overrides)
         if config is None:
             config = EnvConfig(**overrides)
         elif overrides:
-            from dataclasses import replace
-
             config = replace(config, **overrides)
         self.config = config
         self.render_mode = render_mode
@@ -173,8 +179,7 @@ class HexapodEnv(gym.Env):
             goal_distance_m=config.goal_distance_m, max_lateral_deviation_m=config.max_lateral_deviation_m,
             fall_tilt_deg=config.fall_tilt_deg, max_steps=config.max_steps, stall_window_steps=stall_steps,
             stall_min_progress_m=config.stall_min_progress_m))
-        self.level = config.curriculum.start_level if config.curriculum else config.level
-        self.curriculum_successes = 0
+        self.level = config.level  # of the current episode
         self._noise_rng = np.random.default_rng(0)
         self._steps = 0
 
@@ -183,6 +188,7 @@ class HexapodEnv(gym.Env):
         super().reset(seed=seed)
         terrain_rng, init_rng, noise_rng = self.np_random.spawn(3)
         cfg = self.config
+        self.level = options["level"] if options and "level" in options else cfg.level
         x0 = init_rng.uniform(-cfg.init_xy_jitter_m, cfg.init_xy_jitter_m)
         y0 = init_rng.uniform(-cfg.init_xy_jitter_m, cfg.init_xy_jitter_m)
         yaw0 = init_rng.uniform(-cfg.init_yaw_jitter_rad, cfg.init_yaw_jitter_rad)
@@ -220,7 +226,7 @@ class HexapodEnv(gym.Env):
         return a_c + self._eps * action, a_c, action
 
     def step(self, action):
-        # The hot path (issue 2: env step at most 1.15x raw physics). Every numpy call costs about
+        # The hot path (target: env step at most 1.15x raw physics). Every numpy call costs about
         # a microsecond whatever the array size, so this does as few as give the same numbers:
         # the clip ufunc instead of np.minimum/np.maximum pairs, plain floats for the scalars.
         action = action.astype(np.float64) if type(action) is np.ndarray else np.asarray(action, dtype=np.float64)
@@ -251,26 +257,14 @@ class HexapodEnv(gym.Env):
             base_height_cm=100.0 * z, step_limit_exceeded=truncated,
         )
         reward = total_reward(terms, self._weights, self._delta)
-        if reason is not None:
-            cfg = self.config
-            if terminated and cfg.early_end_penalty and reason != "success":
-                reward += (1.0 + self._delta) * early_end_penalty(self._weights)
-            if reason == "success" and cfg.curriculum is not None:
-                self._count_curriculum_success()
-        info = {
+        info = {  # the CPG's a_c may be its cached read-only trajectory, a_t the simulation's command: copies
             "progress_m": progress, "lateral_m": lateral, "end_reason": reason, "level": self.level,
-            "reward_terms": terms, "a_c": a_c, "a_r": a_r, "a_t": sent, "sim_time_s": self._steps * self._control_dt_s,
+            "reward_terms": terms, "a_c": a_c.copy(), "a_r": a_r, "a_t": sent.copy(),
+            "sim_time_s": self._steps * self._control_dt_s,
         }
         if reason is not None:
             info["is_success"] = reason == "success"
         return self._observe(state), reward, terminated, truncated, info
-
-    def _count_curriculum_success(self) -> None:
-        cur = self.config.curriculum
-        self.curriculum_successes += 1
-        if self.curriculum_successes >= cur.successes_per_level and self.level + cur.level_step <= cur.max_level + 1e-9:
-            self.level = round(self.level + cur.level_step, 6)
-            self.curriculum_successes = 0
 
     @property
     def robot_state(self):

@@ -10,13 +10,6 @@
   r_h      z - 12 if z > 12 cm else 0; z = base height above the start ground [cm]
   r_n      -10 on the step the 4000-step limit is exceeded
 
-Training option (not in the paper): `early_end_penalty`. r_d is negative while d > 1 m, so with
-Table 1 as written an agent that ends its episode early (a fall costs only 0.1 x 100 = 10, leaving
-the 0.8 m corridor costs nothing) escapes a long run of negative rewards: our first PPO and
-PPO-CPG weights learned to drift out of the corridor. The penalty charges every early end other
-than success with w_d / (1 - gamma): since r_d > -1, that bounds the discounted loss of staying
-alive, so ending the episode never pays.
-
 delta is the curriculum difficulty factor of eq. 8: +0.1 per 1 cm of rough height difference
 above 5 cm, per 3 deg of slope above 5 deg, per 0.5 cm of step height above 5 cm (the
 curriculum starting levels of section 4.1; clipped at 0 below them).
@@ -80,11 +73,6 @@ def reward_terms(*, distance_m: float, heading_error_rad: float, fell: bool, pit
         "height": base_height_cm - HEIGHT_THRESHOLD_CM if base_height_cm > HEIGHT_THRESHOLD_CM else 0.0,
         "step_limit": -10.0 if step_limit_exceeded else 0.0,
     }
-
-
-def early_end_penalty(weights: RewardWeights, gamma: float = 0.99) -> float:
-    """The (negative) reward for an early end other than success (see module docstring)."""
-    return -weights.distance / (1.0 - gamma)
 
 
 def total_reward(terms: dict[str, float], weights: RewardWeights, delta: float) -> float:

@@ -1,0 +1,120 @@
+"""The environments a run trains on: one curriculum env per worker (paper section 4.1: level up after
+20 arrivals, reward times (1 + delta), observation noise), monitored and observation-scaled, as one
+SB3 VecEnv (SubprocVecEnv for W > 1, DummyVecEnv for W = 1), and the reward normaliser's state.
+
+A config with `normalize_reward = True` trains on rewards divided by a running estimate of the
+discounted return's standard deviation (SB3's VecNormalize, rewards only; observations keep the
+fixed OBS_SCALE, so a checkpoint is still the network alone). Why: the Table 1 returns are in the
+hundreds to thousands, and SB3 clips the *joint* gradient norm of policy and value loss at
+`max_grad_norm` (0.5). Measured on the rough PPO-CPG run (checkpoint 180,502, one minibatch): the
+value-loss gradient norm was 2,556 against the policy loss's 5.7, so clipping scaled the policy
+gradient by 0.0002 and the policy barely learned (its std went 0.368 -> 0.345 in 830k steps). The
+normaliser's statistics are stored with every checkpoint in run.json (plain numbers, no pickle)
+and restored on resume. Episode rewards in progress.csv stay the raw Table 1 returns.
+"""
+
+from __future__ import annotations
+
+from functools import partial
+
+import gymnasium as gym
+import numpy as np
+
+from hexbench.agents.policy import OBS_SCALE
+from hexbench.training.wrappers import Curriculum, CurriculumWrapper, EarlyEndPenalty, make_curriculum_env
+from hexbench.world.env import OBS_HIGH, EnvConfig, HexapodEnv
+
+
+class TrainingWrapper(gym.ObservationWrapper):
+    """Fixed observation scaling (hexbench.agents.policy.OBS_SCALE) and access to the curriculum state."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        self.observation_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
+
+    def observation(self, observation):
+        return (observation * OBS_SCALE).astype(np.float32)
+
+    def _curriculum(self) -> CurriculumWrapper | None:
+        env = self.env
+        while isinstance(env, gym.Wrapper):
+            if isinstance(env, CurriculumWrapper):
+                return env
+            env = env.env
+        return None
+
+    def curriculum_state(self) -> dict:
+        """The curriculum's level and arrivals at it; at one fixed level, that level and 0."""
+        curriculum = self._curriculum()
+        if curriculum is None:
+            return {"level": float(self.env.unwrapped.level), "successes": 0}
+        return curriculum.curriculum_state()
+
+    def set_curriculum_state(self, level: float, successes: int) -> None:
+        curriculum = self._curriculum()
+        if curriculum is not None:  # at one fixed level there is nothing to restore
+            curriculum.set_curriculum_state(level, successes)
+
+
+def make_training_env(terrain: str, action_mode: str, residual_scale: float | None,
+                      fixed_level: float | None = None, early_end_penalty: bool = False,
+                      curriculum: Curriculum | None = None) -> gym.Env:
+    """The curriculum env of paper 4.1 (or another curriculum, or with fixed_level that level alone),
+    noise on, with the early-end penalty if asked, monitored (episode returns with the penalty)."""
+    from stable_baselines3.common.monitor import Monitor
+
+    if fixed_level is None:
+        env = make_curriculum_env(terrain, action_mode, residual_scale=residual_scale,
+                                  early_end_penalty=early_end_penalty, curriculum=curriculum)
+    else:
+        env = HexapodEnv(EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode,
+                                   residual_scale=residual_scale))
+        env = EarlyEndPenalty(env) if early_end_penalty else env
+    return TrainingWrapper(Monitor(env))
+
+
+def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
+                 fixed_level: float | None = None, early_end_penalty: bool = False,
+                 normalize_reward_gamma: float | None = None, curriculum: Curriculum | None = None):
+    """The workers' envs as one VecEnv; with normalize_reward_gamma, rewards are normalised (VecNormalize)."""
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
+
+    factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty,
+                         curriculum) for _ in range(workers)]
+    venv = DummyVecEnv(factories) if workers == 1 else SubprocVecEnv(factories, start_method="fork")
+    if normalize_reward_gamma is None:
+        return venv
+    return VecNormalize(venv, norm_obs=False, norm_reward=True, gamma=normalize_reward_gamma)
+
+
+def make_run_vec_env(settings, config):
+    """The VecEnv of a run: its terrain, config (action mode, eps, penalty, reward normalisation) and options."""
+    return make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale,
+                        settings.fixed_level, getattr(config, "early_end_penalty", False),
+                        config.gamma if getattr(config, "normalize_reward", False) else None, settings.curriculum)
+
+
+def reward_normalizer_state(venv) -> dict | None:
+    """The running return statistics of a reward-normalising VecEnv (None for a plain one)."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if not isinstance(venv, VecNormalize):
+        return None
+    rms = venv.ret_rms
+    return {"mean": float(np.asarray(rms.mean)), "var": float(np.asarray(rms.var)), "count": float(rms.count)}
+
+
+def restore_reward_normalizer(venv, state: dict | None) -> None:
+    """Put saved return statistics (reward_normalizer_state) back into a reward-normalising VecEnv."""
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    if isinstance(venv, VecNormalize) and state:
+        venv.ret_rms.mean = np.float64(state["mean"])
+        venv.ret_rms.var = np.float64(state["var"])
+        venv.ret_rms.count = float(state["count"])
+
+
+def restore_curriculum(venv, curriculum: list[dict] | None) -> None:
+    """Put every env's saved curriculum state (level, arrivals at it) back."""
+    for i, cur in enumerate(curriculum or []):
+        venv.env_method("set_curriculum_state", cur["level"], cur["successes"], indices=[i])
