@@ -252,7 +252,7 @@ def test_cpg_substeps_when_the_control_step_is_long() -> None:
 
 
 def test_cpg_module_imports_only_numpy_and_the_standard_library() -> None:
-    path = Path(__file__).resolve().parents[1] / "hexbench" / "cpg.py"
+    path = Path(__file__).resolve().parents[1] / "hexbench" / "world" / "cpg.py"
     imported = set()
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.Import):

@@ -320,3 +320,25 @@ def test_a_node_dying_mid_run_loses_no_episode(cluster, local_run, tmp_path):
     # the dead node's Ray workers and their sandboxed controller processes are gone too
     gone, alive = psutil.wait_procs(workers + controllers, timeout=30)
     assert not alive, [p.pid for p in alive]
+
+
+@needs_ray
+@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
+def test_verify_replays_on_the_cluster_as_it_does_locally_and_catches_a_flipped_log(cluster, local_run, tmp_path):
+    from hexbench.evaluation import engines
+    from hexbench.replay.verify import verify_run
+
+    local = verify_run(local_run, workers=1)
+    with engines.opened("ray", cluster.address):
+        on_ray = verify_run(local_run, workers=2)
+    assert local.ok and on_ray.ok and on_ray.episodes_replayed == local.episodes_replayed == local.episodes_total
+    # one byte of one action log changed: the log no longer matches its row, on the cluster too
+    forged = tmp_path / "forged"
+    shutil.copytree(local_run, forged)
+    log = sorted((forged / "episodes").glob("*.actions"))[0]
+    data = bytearray(log.read_bytes())
+    data[-1] ^= 0x01
+    log.write_bytes(bytes(data))
+    with engines.opened("ray", cluster.address):
+        caught = verify_run(forged, workers=2)
+    assert not caught.ok and log.stem in caught.message and "\n" not in caught.message

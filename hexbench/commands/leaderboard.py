@@ -51,18 +51,22 @@ def register(app: typer.Typer) -> None:
                                    "(default: all; the entry states how many were replayed)"),
         workers: int = typer.Option(0, "--workers", min=0, help="replay processes (0: all cores)"),
         seed_key: str = typer.Option(None, "--seed-key", help="the key of a keyed (hidden) seed set"),
+        engine: str = typer.Option("local", "--engine", help="where replays run: local (processes on this machine) "
+                                   "or ray (tasks on a Ray cluster; the action logs travel with them)"),
+        address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
     ) -> None:
         """Validate a run's record, replay its episodes from their action logs, copy it in with its admission, rebuild."""
-        import os
 
         from hexbench.errors import HexbenchError
+        from hexbench.evaluation import engines
         from hexbench.leaderboard import RecordError, add, build
         from hexbench.suite.seeds import read_seed_key
 
         try:
             seed_set = read_seed_key(seed_key) if seed_key else None
-            dest = add(run_dir, directory, replace=replace, protocol=protocol, sample=sample,
-                       workers=workers or os.cpu_count() or 1, seed_set=seed_set, progress=True)
+            with engines.opened(engine, address) as replay_engine:
+                dest = add(run_dir, directory, replace=replace, protocol=protocol, sample=sample,
+                           workers=workers or replay_engine.default_workers(), seed_set=seed_set, progress=True)
             result = build(directory, protocol)
         except (RecordError, ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)

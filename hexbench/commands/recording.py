@@ -186,22 +186,26 @@ def register(app: typer.Typer) -> None:
         sample: int = typer.Option(None, "--sample", min=1, help="replay this many episodes drawn at random (default all)"),
         workers: int = typer.Option(0, "--workers", min=0, help="replay processes (0: all cores)"),
         seed_key: str = typer.Option(None, "--seed-key", help="the key of a keyed seed set, to check its seeds"),
+        engine: str = typer.Option("local", "--engine", help="where replays run: local (processes on this machine) "
+                                   "or ray (tasks on a Ray cluster; the action logs travel with them)"),
+        address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
     ) -> None:
         """Replay a run's episodes from their action logs alone (never the controller) and check every row,
         the summaries, the digest and the seeds; the first mismatch is named."""
-        import os
 
         from hexbench.errors import HexbenchError
 
         p = Path(path)
         if p.is_dir():
+            from hexbench.evaluation import engines
             from hexbench.replay.verify import read_run_record, verify_run
             from hexbench.suite.seeds import read_seed_key
 
             try:
                 seed_set = read_seed_key(seed_key) if seed_key else None
-                report = verify_run(p, sample=sample, workers=workers or os.cpu_count() or 1, seed_set=seed_set,
-                                    progress=True)
+                with engines.opened(engine, address) as replay_engine:
+                    report = verify_run(p, sample=sample, workers=workers or replay_engine.default_workers(),
+                                        seed_set=seed_set, progress=True)
             except HexbenchError as e:
                 _fail(str(e), 2)
             if not report.ok:

@@ -104,6 +104,24 @@ class LocalEngine:
                 for p in pending:
                     p.cancel()
 
+    def map(self, fn, items: list, workers: int, advance, stop=None) -> list:
+        """[fn(item) for item in items], in order, in this process (`workers` <= 1: stops early
+        once stop(result) holds) or over a spawn pool of `workers` processes; `advance()` per result.
+        `fn` must be a module-level function of plain data (replays, scoring)."""
+        results = []
+        if workers <= 1:
+            for item in items:
+                results.append(fn(item))
+                advance()
+                if stop is not None and stop(results[-1]):
+                    break
+            return results
+        with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+            for result in pool.map(fn, items, chunksize=4):
+                results.append(result)
+                advance()
+        return results
+
     def close(self) -> None:
         pass
 
@@ -204,6 +222,46 @@ class RayEngine:
                 with contextlib.suppress(Exception):
                     ray.cancel(ref)
 
+    def map(self, fn, items: list, workers: int, advance, stop=None) -> list:
+        """[fn(item) for item in items], in order, as Ray tasks (one CPU each, at most `workers` at
+        once, retried on node loss, never on an exception `fn` raised); `advance()` per result. The
+        items travel to the nodes, so they carry what `fn` needs (an action log's bytes, not its path);
+        the driver's FORWARDED_ENV travels with them."""
+        ray = self.ray
+        self.connect()
+        remote = ray.remote(call_with_env).options(num_cpus=1, max_retries=self.max_retries, retry_exceptions=False)
+        env = {k: os.environ.get(k) for k in FORWARDED_ENV}
+        refs: list = []
+        results: list = []
+        try:
+            for index in range(len(items)):
+                while len(refs) - len(results) >= max(1, workers):
+                    results.append(self._value(refs[len(results)], "a task"))
+                    advance()
+                refs.append(remote.remote(fn, items[index], env))
+            while len(results) < len(refs):
+                results.append(self._value(refs[len(results)], "a task"))
+                advance()
+        finally:
+            for ref in refs[len(results):]:
+                with contextlib.suppress(Exception):
+                    ray.cancel(ref)
+        return results
+
+    def _value(self, ref, what: str):
+        ex = self.ray.exceptions
+        try:
+            return self.ray.get(ref)
+        except ex.RayTaskError as e:
+            cause = getattr(e, "cause", None)
+            if isinstance(cause, HexbenchError):
+                raise cause.with_traceback(None) from None
+            raise EngineError(f"{what} failed in a Ray worker: {type(cause).__name__ if cause is not None else 'error'}: "
+                              f"{' '.join(str(cause if cause is not None else e).split())[:300]}") from None
+        except ex.RayError as e:
+            raise EngineError(f"{what} was lost on the Ray cluster ({type(e).__name__}, after up to "
+                              f"{self.max_retries} retries)") from None
+
     def _result(self, ref, job) -> tuple[dict, dict[str, bytes]]:
         ex = self.ray.exceptions
         try:
@@ -238,6 +296,16 @@ def land_files(job, row: dict, files: dict[str, bytes]) -> None:
 
 # ------------------------------------------------------------------------ inside a Ray worker
 _WORKER: dict = {}
+
+
+def call_with_env(fn, item, env: dict):
+    """fn(item) in a Ray worker, with the driver's FORWARDED_ENV set as on the driver."""
+    for key, value in env.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
+    return fn(item)
 
 
 def ray_episode(job, cwd: str, env: dict) -> tuple[dict, dict[str, bytes]]:
@@ -369,6 +437,19 @@ def current():
 
 
 @contextlib.contextmanager
+def opened(name: str, address: str | None = None):
+    """`make_engine(name, address)` connected (Ray) and in use (`using`) for the block, then closed."""
+    engine = make_engine(name, address)
+    try:
+        if engine.name != "local":
+            engine.connect()
+        with using(engine):
+            yield engine
+    finally:
+        engine.close()
+
+
+@contextlib.contextmanager
 def using(engine):
     """Play the episodes of every `hexbench.evaluation.evaluate.evaluate` call inside with `engine`."""
     token = _CURRENT.set(engine)
@@ -378,5 +459,6 @@ def using(engine):
         _CURRENT.reset(token)
 
 
-__all__ = ["ENGINES", "EngineError", "LocalEngine", "RayEngine", "make_engine", "current", "using", "ray_episode",
+__all__ = ["ENGINES", "EngineError", "LocalEngine", "RayEngine", "make_engine", "current", "using", "opened",
+           "ray_episode", "call_with_env",
            "land_files", "import_ray"]

@@ -13,15 +13,15 @@ from __future__ import annotations
 
 import json
 import math
-from concurrent.futures import ProcessPoolExecutor
+import tempfile
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
 
 from hexbench.artifacts.records import episodes_digest, validate_record
 from hexbench.errors import HexbenchError
+from hexbench.evaluation import engines
 from hexbench.evaluation.episode import first_row_difference, replay_row
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedSet
@@ -161,14 +161,30 @@ def check_seeds(record: dict, seed_set: SeedSet | None) -> str | None:
 
 
 def _replay_one(args: tuple) -> str | None:
-    protocol, row, log_dir = args
+    """One episode replayed from its action log: None, or the first mismatch as one line. The log is
+    read from `log_dir`, or (on a Ray node, which has no run folder) given as bytes."""
+    protocol, row, log_dir, log_bytes = args
     task = load_suite(protocol).task(row["terrain"], float(row["level"]))
     try:
-        replayed = replay_row(task, row, Path(log_dir))
+        if log_bytes is None:
+            replayed = replay_row(task, row, Path(log_dir))
+        else:
+            with tempfile.TemporaryDirectory(prefix="hexbench-replay-") as scratch:
+                (Path(scratch) / Path(row["action_log_path"]).name).write_bytes(log_bytes)
+                replayed = replay_row(task, {**row, "action_log_path": Path(row["action_log_path"]).name}, Path(scratch))
     except HexbenchError as e:
         return f"{_episode_name(row, task.unit)}: {e}"
     diff = first_row_difference(row, replayed)
     return None if diff is None else f"{_episode_name(row, task.unit)}: {diff}"
+
+
+def _log_bytes(log_dir: Path, row: dict) -> bytes | None:
+    """The bytes of a row's action log, to ship to a Ray node (None if it has none: the replay says so)."""
+    name = row.get("action_log_path")
+    path = log_dir / str(name)
+    if not name or Path(str(name)).name != name or not path.is_file():
+        return None
+    return path.read_bytes()
 
 
 def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random.Generator | None = None,
@@ -185,25 +201,15 @@ def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random
     if sample is not None and sample < total:
         rng = rng or np.random.default_rng()
         chosen = [rows[i] for i in sorted(rng.choice(total, size=sample, replace=False))]
-    jobs = [(record["protocol"], row, str(run_dir / "episodes")) for row in chosen]
+    engine = engines.current() or engines.LocalEngine()
+    jobs = [(record["protocol"], row, str(run_dir / "episodes"),
+             None if engine.name == "local" else _log_bytes(run_dir / "episodes", row)) for row in chosen]
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     with Progress(TextColumn("[bold]replaying[/]"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   disable=not progress) as bar:
         task_bar = bar.add_task("episodes", total=len(jobs))
-        if workers <= 1:
-            results = []
-            for job in jobs:
-                results.append(_replay_one(job))
-                bar.advance(task_bar)
-                if results[-1]:
-                    break
-        else:
-            with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-                results = []
-                for result in pool.map(_replay_one, jobs, chunksize=4):
-                    results.append(result)
-                    bar.advance(task_bar)
+        results = engine.map(_replay_one, jobs, workers, lambda: bar.advance(task_bar), stop=bool)
     failures = [r for r in results if r]
     if failures:
         return VerifyReport(False, f"{run_dir}: {failures[0]}", len(results), total)
