@@ -41,12 +41,9 @@ headroom_levels = []
 @pytest.fixture
 def tiny_protocol(tmp_path_factory, monkeypatch):
     """HEXBENCH_TASKS_DIR pointed at a tiny protocol v1 (one level per terrain, 2 episodes of 40 steps),
-    so a whole "full run" takes seconds; the suite cache is cleared on the way in and out."""
-    from hexbench.suite.tasks import load_suite
+    so a whole "full run" takes seconds (load_suite reads the folder in effect at each call)."""
 
     folder = tmp_path_factory.mktemp("tiny_tasks")
     (folder / "protocol_v1.toml").write_text(TINY_PROTOCOL)
     monkeypatch.setenv("HEXBENCH_TASKS_DIR", str(folder))
-    load_suite.cache_clear()
     yield folder
-    load_suite.cache_clear()

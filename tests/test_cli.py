@@ -13,7 +13,7 @@ from hexbench.cli import HexbenchGroup, app
 from hexbench.commands.core import auc_text
 from hexbench.commands.recording import find_controller
 from hexbench.errors import HexbenchError
-from hexbench.suite.tasks import load_suite, registered_ids
+from hexbench.suite.tasks import registered_ids
 
 REPO = Path(__file__).resolve().parent.parent
 CPG = REPO / "baselines" / "cpg.py"
@@ -46,9 +46,7 @@ def protocol(tmp_path_factory):
     (folder / "protocol_v1.toml").write_text(TWO_LEVEL_PROTOCOL)
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("HEXBENCH_TASKS_DIR", str(folder))
-        load_suite.cache_clear()
         yield folder
-    load_suite.cache_clear()
 
 
 @pytest.fixture(scope="module")

@@ -156,11 +156,16 @@ class Suite:
         return out
 
 
-@lru_cache(maxsize=8)
 def load_suite(protocol: str = DEFAULT_PROTOCOL) -> Suite:
-    path = tasks_dir() / f"protocol_{protocol}.toml"
+    """The suite of `protocol` from the tasks folder in effect now ($HEXBENCH_TASKS_DIR, else tasks/)."""
+    return _load_suite(protocol, tasks_dir())
+
+
+@lru_cache(maxsize=8)
+def _load_suite(protocol: str, folder: Path) -> Suite:
+    path = folder / f"protocol_{protocol}.toml"
     if not path.exists():
-        known = sorted(p.stem.removeprefix("protocol_") for p in tasks_dir().glob("protocol_*.toml"))
+        known = sorted(p.stem.removeprefix("protocol_") for p in folder.glob("protocol_*.toml"))
         raise ValueError(f"unknown protocol {protocol!r}; valid protocols: {', '.join(known) or 'none found'}")
     data = tomllib.loads(path.read_text())
     if data.get("protocol") != protocol:
