@@ -432,8 +432,8 @@ def make_engine(name: str, address: str | None = None, **options):
 
 
 def current():
-    """The engine `evaluate` plays episodes with (None: the local process pool)."""
-    return _CURRENT.get()
+    """The engine episodes and replays run on: the one chosen with `using`, else this machine's pool."""
+    return _CURRENT.get() or LocalEngine()
 
 
 @contextlib.contextmanager

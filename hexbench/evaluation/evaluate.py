@@ -269,7 +269,7 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
         done[job.episode_id] = row
         timing[job.episode_id] = (journal.invocation, started_at, elapsed_s)
 
-    engine = engines.current() or engines.LocalEngine()
+    engine = engines.current()
     _play_all(engine, todo, len(jobs), workers, label, progress, finished)
     rows = [done[j.episode_id] for j in jobs]
     run_started_at, wall_time_s = run_time([*timing.values(), (journal.invocation, started_at,

@@ -201,7 +201,7 @@ def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random
     if sample is not None and sample < total:
         rng = rng or np.random.default_rng()
         chosen = [rows[i] for i in sorted(rng.choice(total, size=sample, replace=False))]
-    engine = engines.current() or engines.LocalEngine()
+    engine = engines.current()
     jobs = [(record["protocol"], row, str(run_dir / "episodes"),
              None if engine.name == "local" else _log_bytes(run_dir / "episodes", row)) for row in chosen]
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
