@@ -11,6 +11,7 @@ from hexbench.agents.policy import (
     OBS_SCALE,
     TARGET_X_INDEX,
     PolicyController,
+    actor_layers,
     deterministic_action,
     load_policy,
     scale_observation,
@@ -69,3 +70,4 @@ def test_the_fast_deterministic_action_is_bit_for_bit_sb3_predict_on_every_shipp
         expected, _ = policy.predict(scaled, deterministic=True)
         got = deterministic_action(policy, scaled)
         assert got.dtype == expected.dtype and np.array_equal(got, expected)
+    assert actor_layers(policy) is not None  # the flat path was the one compared

@@ -27,6 +27,7 @@ Checkpoints. Nothing is unpickled from a file whose sha256 was not checked first
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import asdict, fields, is_dataclass
 from pathlib import Path
 
@@ -241,19 +242,25 @@ class PolicyController:
 
 def deterministic_action(policy, scaled_obs: np.ndarray) -> np.ndarray:
     """Bit for bit what `policy.predict(scaled_obs, deterministic=True)[0]` returns, for a single
-    observation, at a third of its cost: predict switches the network's mode, checks and converts the
-    observation and builds an action distribution on every call. The same torch operations run here
-    in the same order (for PPO, the distribution's mode is the action head's output), so actions, and
-    therefore every episode, are unchanged (tests/test_policy.py compares both on every shipped
-    checkpoint)."""
+    observation, at about a sixth of its cost: predict switches the network's mode, checks and
+    converts the observation and builds an action distribution on every call, and every layer is a
+    module call. Here the same torch operations run on the same weight tensors in the same order
+    (`actor_layers`: for PPO the distribution's mode is the action head's output; SAC's is tanh of
+    the mean), so actions, and therefore every episode, are unchanged (tests/test_policy.py compares
+    both on every shipped checkpoint)."""
     import torch
     from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel, BasePolicy
 
     if not isinstance(policy, BasePolicy):  # any other object with SB3's predict signature
         return policy.predict(scaled_obs, deterministic=True)[0]
     with torch.no_grad():
-        obs = torch.as_tensor(np.asarray(scaled_obs)[None])
-        if isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
+        obs = torch.as_tensor(np.asarray(scaled_obs, dtype=np.float32)[None])
+        layers = actor_layers(policy)
+        if layers is not None:
+            action = obs
+            for op, weight, bias in layers:
+                action = op(action) if weight is None else op(action, weight, bias)
+        elif isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
             features = BaseModel.extract_features(policy, obs, policy.pi_features_extractor)
             action = policy.action_net(policy.mlp_extractor.forward_actor(features))
         else:  # SAC, TD3: the actor
@@ -262,6 +269,58 @@ def deterministic_action(policy, scaled_obs: np.ndarray) -> np.ndarray:
     if policy.squash_output:
         return policy.unscale_action(action)
     return np.clip(action, policy.action_space.low, policy.action_space.high)
+
+
+_ACTOR_LAYERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def actor_layers(policy) -> list | None:
+    """The deterministic actor of an SB3 MLP policy as a flat list of (torch function, weight, bias)
+    (weight None: an activation), in the order SB3 applies them; None for any other structure
+    (then `deterministic_action` goes through the modules). The features extractor is left out:
+    for a flat Box observation it is `float()` and `Flatten`, which change nothing of a float32
+    (1, n) tensor. Built once per policy; the tensors are the policy's own."""
+    if policy in _ACTOR_LAYERS:
+        return _ACTOR_LAYERS[policy]
+    import torch
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    activations = {torch.nn.ReLU: torch.relu, torch.nn.Tanh: torch.tanh}
+
+    def flat(*modules) -> list | None:
+        out: list = []
+        for module in modules:
+            if isinstance(module, torch.nn.Sequential):
+                inner = flat(*module)
+                if inner is None:
+                    return None
+                out += inner
+            elif type(module) is torch.nn.Linear:
+                out.append((torch.nn.functional.linear, module.weight, module.bias))
+            elif type(module) in activations:
+                out.append((activations[type(module)], None, None))
+            else:
+                return None
+        return out
+
+    def flat_box(extractor) -> bool:
+        space = policy.observation_space
+        return type(extractor).__name__ == "FlattenExtractor" and type(space).__name__ == "Box" \
+            and len(space.shape) == 1 and space.dtype == np.float32
+
+    layers = None
+    actor = getattr(policy, "actor", None)
+    if isinstance(policy, ActorCriticPolicy):  # PPO: the Gaussian's mean is the action head's output
+        if flat_box(policy.pi_features_extractor):
+            layers = flat(policy.mlp_extractor.policy_net, policy.action_net)
+    elif actor is not None and flat_box(getattr(actor, "features_extractor", None)):
+        if hasattr(actor, "latent_pi") and not getattr(actor, "use_sde", False):  # SAC: tanh of the mean
+            head = flat(actor.latent_pi, actor.mu)
+            layers = None if head is None else head + [(torch.tanh, None, None)]
+        elif not hasattr(actor, "latent_pi"):  # TD3: mu ends in its tanh
+            layers = flat(actor.mu)
+    _ACTOR_LAYERS[policy] = layers
+    return layers
 
 
 # Courses without weights of their own and the policy that walks them: the mixed course gets the
