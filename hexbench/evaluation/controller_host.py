@@ -122,9 +122,10 @@ class Host:
             raise ValueError(f"unknown message kind {kind!r}")
 
     def serve(self) -> None:
+        inbox = wire.Inbox(self.in_fd)
         while True:
             try:
-                kind, payload = wire.recv_blocking(self.in_fd)
+                kind, payload = inbox.recv()
             except EOFError:
                 return
             if kind == wire.QUIT:

@@ -61,6 +61,7 @@ from hexbench.evaluation.remote import NotAnArray, RemoteController, WrongDtype,
 from hexbench.suite.controller import ControllerError
 
 _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
+READ_CHUNK_BYTES = 1 << 16  # the most one read from the child's pipe takes (a pipe's buffer) [bytes]
 CPU_SAMPLE_EVERY_CALLS = 64  # how often the controller's CPU time is sampled (the sample a slow call is measured from)
 
 
@@ -105,6 +106,7 @@ class ControllerProcess:
         self.proc: subprocess.Popen | None = None
         self.built: dict[str, RemoteController] = {}
         self._calls, self._cpu_sample = 0, 0.0
+        self._inbox = bytearray()  # bytes read from the child and not yet taken
         self._start()
 
     def _start(self) -> None:
@@ -197,6 +199,12 @@ class ControllerProcess:
 
     def _send(self, data: bytes, deadline: _Deadline, context: str) -> None:
         view = memoryview(data)
+        try:  # a message fits the pipe's buffer whenever the child has read the previous one: no poll first
+            view = view[os.write(self._to_child, view):]
+        except BlockingIOError:
+            pass
+        except (BrokenPipeError, OSError):
+            raise self._died(context) from None
         while view:
             wait_s = deadline.wait_s()
             if wait_s <= 0:
@@ -211,19 +219,22 @@ class ControllerProcess:
                 raise self._died(context) from None
 
     def _read(self, n: int, deadline: _Deadline, context: str) -> bytes:
-        chunks, got = [], 0
-        while got < n:
+        """The next n bytes from the child. Reads take what the pipe holds (a reply's header and
+        body arrive in one read), and bytes beyond n wait in the inbox for the next call."""
+        inbox = self._inbox
+        while len(inbox) < n:
             wait_s = deadline.wait_s()
             if wait_s <= 0:
                 raise TimeoutError
             if not self._poll_in.poll(max(1, math.ceil(wait_s * 1000))):
                 continue
-            chunk = os.read(self._from_child, n - got)
+            chunk = os.read(self._from_child, max(n - len(inbox), READ_CHUNK_BYTES))
             if not chunk:
                 raise self._died(context)
-            chunks.append(chunk)
-            got += len(chunk)
-        return b"".join(chunks)
+            inbox += chunk
+        data = bytes(inbox[:n])
+        del inbox[:n]
+        return data
 
     def call(self, kind: bytes, payload: bytes, timeout_s: float, what: str, context: str,
              cpu_limited: bool = True) -> tuple[bytes, bytes]:

@@ -15,6 +15,7 @@ Evaluator -> controller process          controller process -> evaluator
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 import struct
@@ -43,10 +44,17 @@ def split_array_payload(payload: bytes) -> tuple[dict, bytes]:
     end = payload.find(b"\n", 0, 4096)
     if end < 0:
         raise ValueError("array message without a header line")
-    header = json.loads(payload[:end])
+    header = _header(bytes(payload[:end]))
     if not isinstance(header, dict):
         raise ValueError("array message header is not an object")
     return header, payload[end + 1:]
+
+
+@functools.lru_cache(maxsize=64)
+def _header(text: bytes):
+    """A parsed header line (callers only read it). The same few headers come with every action,
+    so they are parsed once."""
+    return json.loads(text)
 
 
 def write_all(fd: int, data: bytes) -> None:
@@ -56,18 +64,24 @@ def write_all(fd: int, data: bytes) -> None:
         view = view[os.write(fd, view):]
 
 
-def read_exact_blocking(fd: int, n: int) -> bytes:
-    """Blocking read of exactly n bytes; EOFError if the other side closed (the controller process's side)."""
-    chunks, got = [], 0
-    while got < n:
-        chunk = os.read(fd, n - got)
-        if not chunk:
-            raise EOFError
-        chunks.append(chunk)
-        got += len(chunk)
-    return b"".join(chunks)
+class Inbox:
+    """Blocking reads of whole messages from a pipe, a message (header and body) per read where
+    it arrived in one piece; bytes beyond a message wait for the next (the controller process's side)."""
 
+    def __init__(self, fd: int):
+        self.fd, self.pending = fd, bytearray()
 
-def recv_blocking(fd: int) -> tuple[bytes, bytes]:
-    length, kind = HEADER.unpack(read_exact_blocking(fd, HEADER.size))
-    return bytes([kind]), read_exact_blocking(fd, length) if length else b""
+    def take(self, n: int) -> bytes:
+        while len(self.pending) < n:
+            chunk = os.read(self.fd, max(n - len(self.pending), 1 << 16))
+            if not chunk:
+                raise EOFError
+            self.pending += chunk
+        data = bytes(self.pending[:n])
+        del self.pending[:n]
+        return data
+
+    def recv(self) -> tuple[bytes, bytes]:
+        length, kind = HEADER.unpack(self.take(HEADER.size))
+        return bytes([kind]), self.take(length) if length else b""
+
