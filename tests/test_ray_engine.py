@@ -292,6 +292,26 @@ def test_a_killed_ray_run_resumes_to_the_local_record(cluster, local_run, tmp_pa
 
 
 @needs_ray
+@pytest.mark.slow  # a two-node cluster: minutes
+def test_a_two_seed_training_batch_completes_on_the_cluster(cluster, tmp_path):
+    """`hexbench train --seeds 0-1 --engine ray`: one Ray task per run; runs land in their usual folders."""
+    out = tmp_path / "training"
+    r = subprocess.run([str(BIN / "hexbench"), "train", "baselines/ppo_cpg.py", "--terrain", "rough", "--seeds", "0-1",
+                        "--steps", "2048", "--set", "n_steps=512", "--set", "batch_size=128", "--set", "n_epochs=1",
+                        "--checkpoint-every", "5", "--engine", "ray", "--address", cluster.address, "--out", str(out),
+                        "--no-progress"], cwd=REPO, env=cluster.env, capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stderr
+    assert "2 runs of ppo_cpg (rough x seeds 0-1) on the Ray cluster (2 nodes, 2 CPUs)" in " ".join(r.stderr.split())
+    for seed in (0, 1):
+        run = json.loads((out / f"ppo_cpg-rough-seed{seed}" / "run.json").read_text())
+        assert run["seed"] == seed and run["env_steps"] >= 2048
+        assert (out / f"ppo_cpg-rough-seed{seed}" / run["checkpoints"][-1]["file"]).is_file()
+        assert (out / f"ppo_cpg-rough-seed{seed}" / "progress.csv").is_file()
+    rows = (out / "ppo_cpg-runs.csv").read_text().splitlines()[1:]
+    assert [row.split(",")[3] for row in rows] == ["done", "done"]
+
+
+@needs_ray
 @pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_node_dying_mid_run_loses_no_episode(cluster, local_run, tmp_path):
     """Last in this module: the second node stays dead."""

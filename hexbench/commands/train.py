@@ -14,9 +14,17 @@ def register(app: typer.Typer) -> None:
     @app.command("train")
     def train_command(
         file: Path = typer.Argument(..., help="baseline file with a CONFIG dataclass, e.g. baselines/ppo_cpg.py"),
-        terrain: str = typer.Option(..., "--terrain", help="rough, slopes or stairs"),
+        terrain: str = typer.Option(..., "--terrain", help="rough, slopes or stairs (comma-separated with --seeds)"),
         steps: int = typer.Option(1_000_000, "--steps", help="total env-step budget (summed over workers)"),
         seed: int = typer.Option(0, "--seed", help="seed of the learner and the environments"),
+        seeds: str = typer.Option(None, "--seeds", help="a batch: one run per terrain and seed, e.g. 0-4 or 0,2,5 "
+                                  "(runs in OUT/<method>-<terrain>-seed<S>, summary OUT/<method>-runs.csv)"),
+        engine: str = typer.Option("local", "--engine", help="with --seeds: where the runs train: local (processes "
+                                   "on this machine) or ray (one Ray task per run)"),
+        address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT "
+                                    "[default: RAY_ADDRESS, else the cluster started here, else a local one]"),
+        parallel: int = typer.Option(None, "--parallel", help="with --seeds: runs at once [default local: cores / "
+                                     "--workers; ray: as many as the cluster's CPUs hold]"),
         workers: int = typer.Option(1, "--workers", help="parallel environments (processes when > 1)"),
         out: Path = typer.Option(None, "--out", help="run directory [default: training/<method>-<terrain>-seed<S>]"),
         checkpoint_every_s: float = typer.Option(300.0, "--checkpoint-every", help="seconds between checkpoints"),
@@ -37,6 +45,16 @@ def register(app: typer.Typer) -> None:
         from hexbench.training.settings import TrainSettings, parse_curriculum, parse_override
 
         err = Console(stderr=True)
+        if seeds is not None:
+            _train_batch(file, terrain, seeds, out, engine, address, parallel, dict(
+                total_steps=steps, workers=workers, checkpoint_every_s=checkpoint_every_s, csv_every_s=csv_every_s,
+                overrides=override, device=device, init_from=init_from, fixed_level=level, curriculum=curriculum,
+                value_warmup_steps=value_warmup), progress)
+            return
+        if "," in terrain or engine != "local" or address or parallel is not None:
+            typer.secho("error: several terrains, --engine, --address and --parallel are for a batch of runs: "
+                        "add --seeds, e.g. --seeds 0-4", fg="red", err=True)
+            raise typer.Exit(2)
         try:
             settings = TrainSettings(
                 baseline_path=file, terrain=terrain, total_steps=steps, seed=seed, workers=workers, out_dir=out,
@@ -55,6 +73,51 @@ def register(app: typer.Typer) -> None:
         if last:
             err.print(f"done: {run['env_steps']} env steps, {run['wall_time_s']:.0f} s; "
                       f"last checkpoint {settings.run_dir / last['file']}", highlight=False, soft_wrap=True)
+
+    def _train_batch(file: Path, terrain: str, seeds: str, out: Path | None, engine: str, address: str | None,
+                     parallel: int | None, options: dict, progress: bool) -> None:
+        from rich.console import Console
+        from rich.table import Table
+
+        from hexbench.errors import HexbenchError
+        from hexbench.evaluation import engines
+        from hexbench.training.batch import TrainBatch, check_batch, parse_seeds, parse_terrains, run_batch
+        from hexbench.training.settings import TrainSettings, parse_curriculum, parse_override
+
+        err = Console(stderr=True)
+        try:
+            curriculum = options.pop("curriculum")
+            template = TrainSettings(
+                baseline_path=file, terrain="", command="", show_progress=False,
+                curriculum=parse_curriculum(curriculum) if curriculum is not None else None,
+                **{**options, "overrides": tuple(parse_override(o) for o in options["overrides"])})
+            batch = TrainBatch(template, parse_terrains(terrain), parse_seeds(seeds),
+                               out_root=out or Path("training"), argv=tuple(sys.argv[1:]))
+            if parallel is not None and parallel < 1:
+                raise engines.EngineError(f"--parallel must be >= 1 (got {parallel})")
+            n_runs = len(check_batch(batch))
+            with engines.opened(engine, address) as where:
+                err.print(f"{n_runs} run{'s' * (n_runs != 1)} of {template.method} ({', '.join(batch.terrains)} x seeds "
+                          f"{seeds}) on the {where.describe()}; folders under {batch.out_root}",
+                          highlight=False, soft_wrap=True)
+                rows = run_batch(batch, where, parallel, show_progress=progress)
+        except HexbenchError as e:
+            typer.secho(f"error: {e}", fg="red", err=True)
+            raise typer.Exit(2) from None
+        table = Table(title=f"{template.method}: {len(rows)} runs ({batch.summary_path})")
+        for col in ("terrain", "seed", "status", "env steps", "wall [s]", "success rate", "level (mean)"):
+            table.add_column(col, justify="right")
+        for r in rows:
+            table.add_row(r["terrain"], str(r["seed"]), r["status"], f"{r['env_steps']:,}",
+                          f"{r['wall_time_s']:.0f}" if r["wall_time_s"] is not None else "",
+                          f"{r['success_rate']:.2f}" if r["success_rate"] is not None else "",
+                          f"{r['curriculum_level_mean']:g}" if r["curriculum_level_mean"] is not None else "")
+        Console().print(table)
+        failed = [r for r in rows if r["status"] == "failed"]
+        if failed:
+            listed = "; ".join(f"{r['terrain']} seed {r['seed']}: {r['error']}" for r in failed)
+            typer.secho(f"error: {len(failed)} of {len(rows)} runs failed ({listed})", fg="red", err=True)
+            raise typer.Exit(1)
 
     checkpoints = typer.Typer(help="Shipped baseline weights: publish a run's checkpoint, verify the manifest.",
                               no_args_is_help=True)

@@ -104,10 +104,11 @@ class LocalEngine:
                 for p in pending:
                     p.cancel()
 
-    def map(self, fn, items: list, workers: int, advance, stop=None) -> list:
+    def map(self, fn, items: list, workers: int, advance, stop=None, resources: dict | None = None) -> list:
         """[fn(item) for item in items], in order, in this process (`workers` <= 1: stops early
         once stop(result) holds) or over a spawn pool of `workers` processes; `advance()` per result.
-        `fn` must be a module-level function of plain data (replays, scoring)."""
+        `fn` must be a module-level function of plain data (replays, scoring, training runs).
+        `resources` (what one item needs on a cluster) means nothing here: `workers` is the limit."""
         results = []
         if workers <= 1:
             for item in items:
@@ -117,7 +118,7 @@ class LocalEngine:
                     break
             return results
         with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-            for result in pool.map(fn, items, chunksize=4):
+            for result in pool.map(fn, items):  # one item at a time: items are episodes or whole runs
                 results.append(result)
                 advance()
         return results
@@ -222,14 +223,16 @@ class RayEngine:
                 with contextlib.suppress(Exception):
                     ray.cancel(ref)
 
-    def map(self, fn, items: list, workers: int, advance, stop=None) -> list:
-        """[fn(item) for item in items], in order, as Ray tasks (one CPU each, at most `workers` at
-        once, retried on node loss, never on an exception `fn` raised); `advance()` per result. The
+    def map(self, fn, items: list, workers: int, advance, stop=None, resources: dict | None = None) -> list:
+        """[fn(item) for item in items], in order, as Ray tasks (each asking for `resources`, Ray's
+        task options such as {"num_cpus": 2, "num_gpus": 0}; default one CPU), at most `workers` at
+        once, retried on node loss, never on an exception `fn` raised; `advance()` per result. The
         items travel to the nodes, so they carry what `fn` needs (an action log's bytes, not its path);
         the driver's FORWARDED_ENV travels with them."""
         ray = self.ray
         self.connect()
-        remote = ray.remote(call_with_env).options(num_cpus=1, max_retries=self.max_retries, retry_exceptions=False)
+        options = {"num_cpus": 1, **(resources or {})}
+        remote = ray.remote(call_with_env).options(**options, max_retries=self.max_retries, retry_exceptions=False)
         env = {k: os.environ.get(k) for k in FORWARDED_ENV}
         refs: list = []
         results: list = []

@@ -16,4 +16,5 @@ hyper-parameters.
     publish     `hexbench checkpoints publish`
     curves      learning curves (paper Fig. 4)
     sweep       the epsilon search (paper 3.2)
+    batch       a batch of runs, one per (terrain, seed), locally or on Ray (`hexbench train --seeds`)
 """

@@ -9,6 +9,7 @@ they are not saved.
 from __future__ import annotations
 
 import signal
+import threading
 from pathlib import Path
 
 from hexbench.agents.policy import action_noise, algo_class, config_dict, policy_kwargs, sb3_kwargs
@@ -110,10 +111,13 @@ def learn(settings: TrainSettings, run: dict, model, venv) -> dict:
                         reward_normalizer_state(venv))
 
     progress, task, console = progress_bar(settings, model.num_timesteps)
-    callback = TrainingMonitor(settings, run, save, progress, task, console if not console.is_terminal else None)
+    log_to = console if settings.log_lines and not console.is_terminal else None  # a log file: lines, not a bar
+    callback = TrainingMonitor(settings, run, save, progress, task, log_to)
     callbacks = [callback, make_value_warmup(settings.value_warmup_steps)] if settings.value_warmup_steps else callback
     interrupted = False
-    old_handler = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    # SIGTERM checkpoints too; signals reach the main thread only (a run in a worker thread keeps its default)
+    in_main_thread = threading.current_thread() is threading.main_thread()
+    old_handler = signal.signal(signal.SIGTERM, _raise_keyboard_interrupt) if in_main_thread else None
     try:
         with progress:
             model.learn(total_timesteps=settings.total_steps - model.num_timesteps, reset_num_timesteps=False,
@@ -121,7 +125,8 @@ def learn(settings: TrainSettings, run: dict, model, venv) -> dict:
     except KeyboardInterrupt:
         interrupted = True
     finally:
-        signal.signal(signal.SIGTERM, old_handler)
+        if in_main_thread:
+            signal.signal(signal.SIGTERM, old_handler)
     if callback.model is not None and callback.model.num_timesteps > (run["env_steps"] or 0):
         callback.num_timesteps = callback.model.num_timesteps
         try:

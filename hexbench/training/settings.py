@@ -41,6 +41,7 @@ class TrainSettings:
     overrides: tuple[tuple[str, object], ...] = ()  # config field overrides (name, value)
     command: str = ""
     show_progress: bool = True
+    log_lines: bool = True  # one line per progress.csv row on stderr when it is not a terminal (a log file)
     fixed_level: float | None = None  # train at one suite level without the curriculum (--level; epsilon sweep)
     device: str = "cpu"  # torch device of the learner ("cpu" or "cuda"); envs always step on the CPU
     init_from: Path | None = None  # shipped weights (baselines/checkpoints/<method>-<terrain>.zip) to start from
