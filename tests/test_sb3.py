@@ -39,3 +39,27 @@ def test_unknown_method_or_terrain_is_one_line():
         load_sb3("ppo_cpgg", "rough")
     with pytest.raises(CheckpointError):
         load_sb3("ppo_cpg", "ice")
+
+
+def test_the_rl_zoo3_hyperparameters_are_the_ppo_cpg_config():
+    """baselines/rl_zoo3/ppo_cpg.yml states baselines/ppo_cpg.py's CONFIG for each curriculum id."""
+    import gymnasium as gym
+    import yaml
+
+    from hexbench.agents.policy import policy_kwargs
+
+    config = load_controller_module(REPO / "baselines" / "ppo_cpg.py").CONFIG
+    zoo = yaml.safe_load((REPO / "baselines" / "rl_zoo3" / "ppo_cpg.yml").read_text())
+    assert set(zoo) == {f"hexbench/{t}-Curriculum-CpgResidual-v1" for t in ("Rough", "Slopes", "Stairs")}
+    for env_id, entry in zoo.items():
+        assert env_id in gym.registry
+        for name in ("learning_rate", "batch_size", "n_steps", "n_epochs", "gamma", "gae_lambda", "clip_range",
+                     "ent_coef"):
+            assert entry[name] == getattr(config, name), (env_id, name)
+        assert entry["n_timesteps"] == 1e6 and entry["env_wrapper"] == "hexbench.agents.sb3.ScaledObservation"
+        import torch.nn as nn
+
+        assert eval(entry["policy_kwargs"], {"nn": nn}) == policy_kwargs(config)  # noqa: S307 - our own file
+        assert eval(entry["normalize"]) == {"norm_obs": False, "norm_reward": config.normalize_reward,  # noqa: S307
+                                            "gamma": config.gamma}
+    assert not config.use_sde  # the zoo file states the paper's Gaussian exploration
