@@ -1,5 +1,5 @@
 """hexbench run --engine ray: a real two-node Ray cluster on 127.0.0.1 gives the local engine's record,
-also when one node dies mid-run; without Ray, one line and exit 2.
+also when one node dies mid-run, and trains a two-seed batch; without Ray, one line and exit 2.
 
 The cluster is made here (`ray start --head` + `ray start --address`, one CPU each, private temp
 folder, free ports, a token of its own) and torn down by process id: every process whose command
@@ -31,6 +31,7 @@ REPO = Path(__file__).resolve().parent.parent
 CPG = "baselines/cpg.py"  # relative: the Ray tasks change into the driver's folder, as on a real cluster
 BIN = Path(sys.executable).parent
 EPISODES = ["--episodes", "3"]  # tiny protocol: 3 terrains x 1 level x 3 episodes of 40 steps
+pytestmark = pytest.mark.timeout(600)  # a cluster test that hangs fails, and the fixture still stops the cluster
 needs_ray = pytest.mark.skipif(find_spec("ray") is None or find_spec("psutil") is None,
                                reason="Ray is not installed (pip install 'hexbench[ray]'); psutil (test extra) needed")
 
@@ -227,7 +228,6 @@ def _same_record(local: Path, ray: Path) -> None:
 
 
 @needs_ray
-@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_ray_cluster_gives_the_local_record(cluster, local_run, tmp_path):
     out = _with_secret_of(local_run, tmp_path / "ray")
     proc = _ray_run(cluster, out)
@@ -256,7 +256,6 @@ def _controller_processes(cluster: Cluster) -> list:
 
 
 @needs_ray
-@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_controller_error_on_the_cluster_is_one_line_and_no_files(cluster, module_tiny_protocol, tmp_path):
     """A controller's error is a result, not a node failure: not retried, the run stops with its line."""
     out = tmp_path / "broken"
@@ -272,7 +271,6 @@ def test_a_controller_error_on_the_cluster_is_one_line_and_no_files(cluster, mod
 
 
 @needs_ray
-@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_killed_ray_run_resumes_to_the_local_record(cluster, local_run, tmp_path):
     out = _with_secret_of(local_run, tmp_path / "ray-resume")
     proc = _ray_run(cluster, out)
@@ -292,7 +290,6 @@ def test_a_killed_ray_run_resumes_to_the_local_record(cluster, local_run, tmp_pa
 
 
 @needs_ray
-@pytest.mark.slow  # a two-node cluster: minutes
 def test_a_two_seed_training_batch_completes_on_the_cluster(cluster, tmp_path):
     """`hexbench train --seeds 0-1 --engine ray`: one Ray task per run; runs land in their usual folders."""
     out = tmp_path / "training"
@@ -312,7 +309,6 @@ def test_a_two_seed_training_batch_completes_on_the_cluster(cluster, tmp_path):
 
 
 @needs_ray
-@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_a_node_dying_mid_run_loses_no_episode(cluster, local_run, tmp_path):
     """Last in this module: the second node stays dead."""
     import psutil
@@ -340,7 +336,6 @@ def test_a_node_dying_mid_run_loses_no_episode(cluster, local_run, tmp_path):
 
 
 @needs_ray
-@pytest.mark.slow  # a two-node cluster: minutes, and it hung once on a loaded 2-core machine
 def test_verify_replays_on_the_cluster_as_it_does_locally_and_catches_a_flipped_log(cluster, local_run, tmp_path):
     def verify_on_ray(run: Path) -> subprocess.CompletedProcess:
         return subprocess.run([str(BIN / "hexbench"), "verify", str(run), "--engine", "ray", "--address", cluster.address],
