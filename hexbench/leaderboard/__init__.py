@@ -18,6 +18,7 @@ build shows one protocol. Extra courses (the mixed course) are scored apart, in
   courses     the extra courses' records and leaderboard/courses/README.md
   generate    `hexbench leaderboard build`: everything rendered, then written atomically
   admission   `hexbench leaderboard add`: replay before a record joins; `--replace` never downgrades
+  statistics  aggregates over runs (seeds): IQM, stratified-bootstrap intervals, probability of improvement
 """
 
 from hexbench.leaderboard.admission import add
