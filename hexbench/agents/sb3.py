@@ -39,10 +39,10 @@ from hexbench.agents.policy import (
 )
 from hexbench.artifacts.provenance import REPO_ROOT
 from hexbench.errors import HexbenchError
+from hexbench.suite.tasks import curriculum_id, register_envs
 from hexbench.world.env import OBS_HIGH
 
 SHIPPED_DIR = REPO_ROOT / "baselines" / "checkpoints"
-MODE_IDS = {"joint": "Joint", "cpg_residual": "CpgResidual", "cpg_params": "CpgParams"}
 
 
 class ScaledObservation(gym.ObservationWrapper):
@@ -58,13 +58,11 @@ class ScaledObservation(gym.ObservationWrapper):
 
 def curriculum_env(config, terrain: str, protocol: str = "v1") -> gym.Env:
     """The terrain's registered training curriculum for the config's action mode, observation-scaled."""
-    import hexbench.suite.tasks  # noqa: F401 - registers the hexbench ids
-
     kwargs = {"residual_scale": config.residual_scale} if config.action_mode == "cpg_residual" else {}
     if getattr(config, "early_end_penalty", False):
         kwargs["early_end_penalty"] = True
-    env_id = f"hexbench/{terrain.capitalize()}-Curriculum-{MODE_IDS[config.action_mode]}-{protocol}"
-    return ScaledObservation(gym.make(env_id, **kwargs))
+    register_envs(protocol)
+    return ScaledObservation(gym.make(curriculum_id(terrain, config.action_mode, protocol), **kwargs))
 
 
 def load_sb3(method: str, terrain: str, env: gym.Env | None = None, *, checkpoints_dir: Path = SHIPPED_DIR,

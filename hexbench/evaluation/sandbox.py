@@ -61,7 +61,6 @@ from hexbench.evaluation.remote import NotAnArray, RemoteController, WrongDtype,
 from hexbench.suite.controller import ControllerError
 
 _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
-READ_CHUNK_BYTES = 1 << 16  # the most one read from the child's pipe takes (a pipe's buffer) [bytes]
 CPU_SAMPLE_EVERY_CALLS = 64  # how often the controller's CPU time is sampled (the sample a slow call is measured from)
 
 
@@ -228,7 +227,7 @@ class ControllerProcess:
                 raise TimeoutError
             if not self._poll_in.poll(max(1, math.ceil(wait_s * 1000))):
                 continue
-            chunk = os.read(self._from_child, max(n - len(inbox), READ_CHUNK_BYTES))
+            chunk = os.read(self._from_child, max(n - len(inbox), wire.READ_CHUNK_BYTES))
             if not chunk:
                 raise self._died(context)
             inbox += chunk

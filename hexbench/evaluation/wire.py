@@ -22,6 +22,7 @@ import struct
 
 HEADER = struct.Struct("<IB")
 MAX_MESSAGE_BYTES = 1 << 20  # what a controller process may send in one message [bytes]
+READ_CHUNK_BYTES = 1 << 16  # the most one read from a pipe takes (a pipe's buffer) [bytes]
 
 MAKE, RESET, ACT, SEE, QUIT = b"M", b"R", b"A", b"S", b"Q"
 OK, ACTION, ERROR = b"K", b"a", b"E"
@@ -73,7 +74,7 @@ class Inbox:
 
     def take(self, n: int) -> bytes:
         while len(self.pending) < n:
-            chunk = os.read(self.fd, max(n - len(self.pending), 1 << 16))
+            chunk = os.read(self.fd, max(n - len(self.pending), READ_CHUNK_BYTES))
             if not chunk:
                 raise EOFError
             self.pending += chunk

@@ -67,20 +67,29 @@ def mean_score(scores) -> float:
 def interval(scores, statistic, rng: np.random.Generator, resamples: int = DEFAULT_RESAMPLES,
              confidence: float = DEFAULT_CONFIDENCE) -> Estimate:
     """statistic(scores) with its stratified-bootstrap percentile interval over runs."""
-    from scipy.stats import bootstrap
-
     matrix = as_matrix(scores)
     value = statistic(matrix)
     runs = matrix.shape[0]
     if runs < 2:
         return Estimate(value, value, value, runs, confidence)
     columns = tuple(matrix[:, task] for task in range(matrix.shape[1]))
-    result = bootstrap(columns, lambda *cols: statistic(np.column_stack(cols)), n_resamples=resamples,
-                       vectorized=False, paired=False, confidence_level=confidence, method="percentile", rng=rng)
+    low, high = _percentile_interval(columns, lambda *cols: statistic(np.column_stack(cols)), value, rng,
+                                     resamples, confidence)
+    return Estimate(value, low, high, runs, confidence)
+
+
+def _percentile_interval(samples: tuple, statistic, value: float, rng: np.random.Generator, resamples: int,
+                         confidence: float) -> tuple[float, float]:
+    """The percentile interval of statistic(*samples) with each sample resampled on its own (the
+    strata), widened to hold `value`; every resample equal (scipy then gives nan): the point."""
+    from scipy.stats import bootstrap
+
+    result = bootstrap(samples, statistic, n_resamples=resamples, vectorized=False, paired=False,
+                       confidence_level=confidence, method="percentile", rng=rng)
     low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    if not np.isfinite(low) or not np.isfinite(high):  # every resample equal: scipy gives nan
-        low = high = value
-    return Estimate(value, min(low, value), max(high, value), runs, confidence)
+    if not np.isfinite(low) or not np.isfinite(high):
+        return value, value
+    return min(low, value), max(high, value)
 
 
 def iqm(scores, rng: np.random.Generator, **options) -> Estimate:
@@ -105,8 +114,6 @@ def probability_of_improvement_interval(x, y, rng: np.random.Generator, resample
                                         confidence: float = DEFAULT_CONFIDENCE) -> Estimate:
     """P(X > Y) with a stratified-bootstrap interval: the runs of X and of Y resampled, each within
     every task, independently (both methods' seeds are samples)."""
-    from scipy.stats import bootstrap
-
     a, b = as_matrix(x), as_matrix(y)
     value = probability_of_improvement(a, b)
     tasks = a.shape[1]
@@ -117,12 +124,8 @@ def probability_of_improvement_interval(x, y, rng: np.random.Generator, resample
     def statistic(*cols):
         return probability_of_improvement(np.column_stack(cols[:tasks]), np.column_stack(cols[tasks:]))
 
-    result = bootstrap(samples, statistic, n_resamples=resamples, vectorized=False, paired=False,
-                       confidence_level=confidence, method="percentile", rng=rng)
-    low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    if not np.isfinite(low) or not np.isfinite(high):
-        low = high = value
-    return Estimate(value, min(low, value), max(high, value), min(a.shape[0], b.shape[0]), confidence)
+    low, high = _percentile_interval(samples, statistic, value, rng, resamples, confidence)
+    return Estimate(value, low, high, min(a.shape[0], b.shape[0]), confidence)
 
 
 def performance_profile(scores, thresholds) -> np.ndarray:

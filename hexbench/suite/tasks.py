@@ -186,6 +186,11 @@ def _load_suite(protocol: str, folder: Path) -> Suite:
     return Suite(protocol, tuple(t for t in tasks if t.in_full_run), tuple(t for t in tasks if not t.in_full_run))
 
 
+def curriculum_id(terrain: str, action_mode: str, protocol: str = DEFAULT_PROTOCOL) -> str:
+    """The Gymnasium id of a terrain's training curriculum, e.g. hexbench/Rough-Curriculum-CpgResidual-v1."""
+    return f"hexbench/{terrain.capitalize()}-Curriculum-{MODE_IDS[action_mode]}-{protocol}"
+
+
 def registered_ids() -> list[str]:
     import gymnasium as gym
 
@@ -205,7 +210,7 @@ def register_envs(protocol: str = DEFAULT_PROTOCOL) -> None:
         for task in load_suite(protocol).all_tasks:
             register(task.gym_id(mode), ENV_ENTRY_POINT, task.env_kwargs(mode), task.max_steps)
         for terrain in CURRICULUM_TERRAINS:
-            register(f"hexbench/{terrain.capitalize()}-Curriculum-{m}-{protocol}", CURRICULUM_ENTRY_POINT,
+            register(curriculum_id(terrain, mode, protocol), CURRICULUM_ENTRY_POINT,
                      {"terrain": terrain, "action_mode": mode, "max_steps": MAX_EPISODE_STEPS}, MAX_EPISODE_STEPS)
         register(f"hexbench/Flat-{m}-{protocol}", ENV_ENTRY_POINT,
                  {"terrain": "flat", "action_mode": mode, "max_steps": MAX_EPISODE_STEPS}, MAX_EPISODE_STEPS)
