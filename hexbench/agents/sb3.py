@@ -35,6 +35,7 @@ from hexbench.agents.policy import (
     load_policy_weights,
     policy_kwargs,
     sb3_kwargs,
+    scale_observation,
     shipped_checkpoint,
 )
 from hexbench.artifacts.provenance import REPO_ROOT
@@ -53,7 +54,7 @@ class ScaledObservation(gym.ObservationWrapper):
         self.observation_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
 
     def observation(self, observation):
-        return (np.asarray(observation, dtype=np.float32) * OBS_SCALE).astype(np.float32)
+        return scale_observation(observation)
 
 
 def curriculum_env(config, terrain: str, protocol: str = "v1") -> gym.Env:

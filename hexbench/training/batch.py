@@ -30,15 +30,14 @@ others go on, and the batch ends with exit 1 naming the failed runs.
 from __future__ import annotations
 
 import csv
-import json
 import os
 import secrets
 import threading
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-from hexbench.artifacts.files import write_bytes_atomic, write_text_atomic
-from hexbench.training.runs import RUN_FILE, read_run
+from hexbench.artifacts.files import atomic_path, write_bytes_atomic, write_text_atomic
+from hexbench.training.runs import read_run
 from hexbench.training.settings import TRAIN_TERRAINS, TrainError, TrainSettings, check_settings, load_run_config
 
 RUNS_COLUMNS = ("terrain", "seed", "run_dir", "status", "env_steps", "total_steps", "wall_time_s", "checkpoints",
@@ -252,13 +251,10 @@ def summary_row(settings: TrainSettings, error: str | None) -> dict:
 
 
 def write_runs_csv(path: Path, rows: list[dict]) -> None:
-    import io
-
-    buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=RUNS_COLUMNS, lineterminator="\n")
-    writer.writeheader()
-    writer.writerows({k: ("" if r.get(k) is None else r[k]) for k in RUNS_COLUMNS} for r in rows)
-    write_text_atomic(path, buffer.getvalue())
+    with atomic_path(path) as tmp, open(tmp, "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=RUNS_COLUMNS, lineterminator="\n")
+        writer.writeheader()
+        writer.writerows({k: ("" if r.get(k) is None else r[k]) for k in RUNS_COLUMNS} for r in rows)
 
 
 class _Progress:
@@ -296,10 +292,9 @@ class _Progress:
     def _update(self) -> None:
         steps = 0
         for settings in self.runs:
-            path = Path(settings.run_dir) / RUN_FILE
-            try:
-                steps += min(int(json.loads(path.read_text()).get("env_steps") or 0), settings.total_steps)
-            except (OSError, ValueError, TypeError, AttributeError):
+            try:  # a run.json half-way through an atomic replace, or another run's: counted next time
+                steps += min(int((read_run(settings.run_dir) or {}).get("env_steps") or 0), settings.total_steps)
+            except (TrainError, OSError, ValueError, TypeError, AttributeError):
                 continue
         self.progress.update(self.task, completed=steps, info=f"{self.finished}/{len(self.runs)} runs finished")
 

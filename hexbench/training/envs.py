@@ -20,20 +20,13 @@ from functools import partial
 import gymnasium as gym
 import numpy as np
 
-from hexbench.agents.policy import OBS_SCALE
+from hexbench.agents.sb3 import ScaledObservation
 from hexbench.training.wrappers import Curriculum, CurriculumWrapper, EarlyEndPenalty, make_curriculum_env
-from hexbench.world.env import OBS_HIGH, EnvConfig, HexapodEnv
+from hexbench.world.env import EnvConfig, HexapodEnv
 
 
-class TrainingWrapper(gym.ObservationWrapper):
-    """Fixed observation scaling (hexbench.agents.policy.OBS_SCALE) and access to the curriculum state."""
-
-    def __init__(self, env: gym.Env):
-        super().__init__(env)
-        self.observation_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
-
-    def observation(self, observation):
-        return (observation * OBS_SCALE).astype(np.float32)
+class TrainingWrapper(ScaledObservation):
+    """The fixed observation scaling every network trains on (ScaledObservation), and access to the curriculum state."""
 
     def _curriculum(self) -> CurriculumWrapper | None:
         env = self.env
