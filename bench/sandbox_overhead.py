@@ -112,9 +112,10 @@ def main() -> None:
     identical = rows[mode] == rows["none"]
     ratio = sum(walls[mode]) / sum(walls["none"])
     per_round = [a / b for a, b in zip(walls[mode], walls["none"])]
+    median_ratio = statistics.median(per_round)
     cpu_ratio = sum(cpus[mode]) / sum(cpus["none"])
     print(f"sandboxed ({mode}) / in-process wall time: {ratio:.3f} overall, median of rounds "
-          f"{statistics.median(per_round):.3f}; per round " + ", ".join(f"{r:.3f}" for r in per_round)
+          f"{median_ratio:.3f}; per round " + ", ".join(f"{r:.3f}" for r in per_round)
           + f"; rows identical: {identical}")
     print(f"sandboxed / in-process CPU time (machine-wide busy time: all processes): {cpu_ratio:.3f}")
     per_step = [s / n for s, n in zip(sizes, steps)]
@@ -130,7 +131,7 @@ def main() -> None:
     (out / "sandbox_overhead.json").write_text(json.dumps({
         "controller": args.controller, "isolation": mode, "episodes_per_level": args.episodes, "levels": LEVELS,
         "workers": args.workers, "wall_time_s": walls, "cpu_time_s": cpus, "cpu_ratio": cpu_ratio, "ratio": ratio, "ratio_per_round": per_round,
-        "ratio_median_of_rounds": statistics.median(per_round),
+        "ratio_median_of_rounds": median_ratio,
         "rows_identical": identical, "action_log_bytes": sizes, "episode_steps": steps,
         "act_round_trip_us": trips, "load_average_at_end": os.getloadavg()}, indent=1))
 
