@@ -19,6 +19,8 @@ build shows one protocol. Extra courses (the mixed course) are scored apart, in
   generate    `hexbench leaderboard build`: everything rendered, then written atomically
   admission   `hexbench leaderboard add`: replay before a record joins; `--replace` never downgrades
   statistics  aggregates over runs (seeds): IQM, stratified-bootstrap intervals, probability of improvement
+  seeds       seed runs (baselines/seeds/) read, validated, bound to their manifests and aggregated per method
+  seeds_page  leaderboard/seeds/: the methods across their seeds (tables and SVG figures)
 """
 
 from hexbench.leaderboard.admission import add

@@ -17,6 +17,8 @@ from hexbench.leaderboard.html_page import render_html
 from hexbench.leaderboard.ranking import Board, make_board
 from hexbench.leaderboard.readme import render_readme
 from hexbench.leaderboard.records import RecordError, load_rows
+from hexbench.leaderboard.seeds import SEEDS_DIR, aggregate, improvements, load_seed_runs, reference_runs
+from hexbench.leaderboard.seeds_page import SEEDS_PAGE_DIR, render_seeds_page
 from hexbench.leaderboard.table_csv import render_csv
 from hexbench.suite.tasks import DEFAULT_PROTOCOL, load_suite
 
@@ -54,11 +56,13 @@ def render_all(board: Board) -> dict[str, str]:
 
 
 def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCOL,
-          root: str | Path | None = None) -> BuildResult:
+          root: str | Path | None = None, seeds: str | Path | None = None) -> BuildResult:
     """Read every record under `directory`, write README.md, index.html and leaderboard.csv there.
 
     Records' checkpoint paths resolve against `root` (default: the directory's parent, the repository)
-    to show each controller's training budget from the checkpoint manifest.
+    to show each controller's training budget from the checkpoint manifest. Where the seed-run folder
+    `seeds` (default: `root`/baselines/seeds) exists, the methods across their seeds are written to
+    `directory`/seeds/ (hexbench.leaderboard.seeds).
 
     Refused records are left out and reported in `errors` (the caller decides the exit status);
     the three files are rendered completely before any is written.
@@ -68,7 +72,8 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
         raise RecordError(f"{directory}: no such leaderboard directory")
     load_suite(protocol)  # ValueError naming the valid protocols
     load = load_rows(directory, protocol)
-    board = make_board(load, protocol, directory.resolve().parent if root is None else Path(root))
+    root = directory.resolve().parent if root is None else Path(root)
+    board = make_board(load, protocol, root)
     texts = render_all(board)
     files = {directory / name: texts[name] for name in GENERATED_FILES}
     errors, skipped = list(load.errors), list(load.skipped)
@@ -78,5 +83,14 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
         errors += course_load.errors
         skipped += course_load.skipped
         files[courses / "README.md"] = render_courses_readme(course_load.rows, board.suite)
+    seeds = root / SEEDS_DIR if seeds is None else Path(seeds)
+    if seeds.is_dir():
+        seed_load = load_seed_runs(seeds, protocol)
+        errors += seed_load.errors
+        skipped += seed_load.skipped
+        aggregates = aggregate(seed_load.runs + reference_runs(board.measured, board.suite.terrains), board.suite)
+        page = render_seeds_page(aggregates, improvements(aggregates), board.suite, seed_load.errors)
+        (directory / SEEDS_PAGE_DIR).mkdir(exist_ok=True)
+        files.update({directory / SEEDS_PAGE_DIR / name: text for name, text in page.items()})
     write_all_atomically(files)
     return BuildResult(list(files), board, errors, skipped)

@@ -26,7 +26,7 @@ def measured_color(board: Board, label: str) -> str:
     return MEASURED_COLORS[labels.index(label) % len(MEASURED_COLORS)]
 
 
-def _literal_legend_texts(legend) -> None:
+def literal_legend_texts(legend) -> None:
     """Legend entries are record labels: drawn as literal text, never parsed as mathtext (`$...$`).
     matplotlib escapes text for SVG itself (`<`, `&`; `--` in the comments it writes)."""
     for text in legend.get_texts():
@@ -96,14 +96,14 @@ def _draw_legends(fig, measured_handles: list, reported_handles: list) -> None:
         legend = fig.legend(handles=measured_handles, title="measured here\n(whiskers: 95% Wilson interval)",
                             bbox_to_anchor=(0.655, top), **legend_style)
         legend.get_title().set_fontweight("bold")
-        _literal_legend_texts(legend)
+        literal_legend_texts(legend)
         top -= 0.062 * (len(measured_handles) + 2) + 0.05
     if reported_handles:
         legend = fig.legend(handles=reported_handles, title=f"paper reference\n({REPORTED_NOTE})",
                             bbox_to_anchor=(0.655, top), **legend_style)
         legend.get_title().set_fontweight("bold")
         legend.get_title().set_color("#6b5b2e")
-        _literal_legend_texts(legend)
+        literal_legend_texts(legend)
 
 
 def _inline_svg(svg: str, terrain: str) -> str:

@@ -199,11 +199,13 @@ def _measured_details(record: dict, tier: str) -> dict:
     }
 
 
-def measured_row(record: dict, where: str, course: bool = False) -> Row:
+def measured_row(record: dict, where: str, course: bool = False, terrains_covered: bool = False) -> Row:
     """Validate a measured record (see module docstring) and return its row; RecordError if refused.
 
     course=True validates a record of the extra courses (every seed of every level of the courses
-    it covers) instead of the full run.
+    it covers) instead of the full run; terrains_covered=True a record of some of the full run's
+    terrains (every seed of every level of each terrain it covers: a seed run's
+    `hexbench run FILE --terrain T` record, hexbench.leaderboard.seeds).
     """
     check_schema(record, where)
     if record["kind"] != "measured":
@@ -213,6 +215,9 @@ def measured_row(record: dict, where: str, course: bool = False) -> Row:
     if course:
         covered = {e["terrain"] for e in record["episodes"]}
         tasks = tuple(t for t in suite.extra_tasks if t.terrain in covered) or suite.extra_tasks
+    elif terrains_covered:
+        covered = {e["terrain"] for e in record["episodes"]}
+        tasks = tuple(t for t in suite.tasks if t.terrain in covered) or suite.tasks
     else:
         tasks = suite.tasks
     tier = record_tier(record, where)
