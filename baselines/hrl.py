@@ -40,6 +40,10 @@ class Config:
     # terrain's lowest level. The ranges' midpoint (action 0) has A1 = 0: no hip swing, no walking;
     # started there, HRL made no arrival in 296k steps. PPO-CPG likewise starts at the CPG (a_r = 0).
     initial_action: tuple[float, ...] = cpg_params_action(math.pi, 0.45, 1.2, 1.0)
+    # Not in the paper: the policy decides every K control steps (60 Hz) and the CPG keeps its
+    # parameters in between (hexbench.training.wrappers.DecisionInterval). 1 = every step, as the
+    # shipped v4 weights trained; HRL v4 then switches its hip amplitude bang-bang (docs/training.md).
+    decision_interval_steps: int = 1
 
 
 CONFIG = Config()

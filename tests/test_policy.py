@@ -71,3 +71,15 @@ def test_the_fast_deterministic_action_is_bit_for_bit_sb3_predict_on_every_shipp
         got = deterministic_action(policy, scaled)
         assert got.dtype == expected.dtype and np.array_equal(got, expected)
     assert actor_layers(policy) is not None  # the flat path was the one compared
+
+
+def test_a_decision_interval_holds_each_decision_for_that_many_steps_and_resets_per_episode():
+    policy = RecordingPolicy()
+    ctrl = PolicyController("cpg_params", policy, decision_interval_steps=3)
+    obs = np.zeros(62, np.float32)
+    for _ in range(7):
+        ctrl.act(obs)
+    assert len(policy.seen) == 3  # decisions at steps 0, 3 and 6
+    ctrl.reset(1)
+    ctrl.act(obs)
+    assert len(policy.seen) == 4  # a new episode starts with a new decision

@@ -165,6 +165,24 @@ def test_hrl_starts_from_the_cpg_gait_and_walks(tmp_path):
     assert info["end_reason"] == "success"
 
 
+def test_a_decision_interval_counts_control_steps_and_holds_actions_in_selection(tmp_path):
+    """With decision_interval_steps K, the budget, run.json and progress.csv count control steps
+    (SB3 counts decisions); the run's config carries K, so selection holds actions as training did."""
+    out = tmp_path / "run"
+    result = train_tiny("hrl", out, steps=600, extra=("--set", "decision_interval_steps=10", "--set", "n_steps=16",
+                                                    "--set", "batch_size=16"))
+    assert result.exit_code == 0, result.output
+    run = json.loads((out / "run.json").read_text())
+    assert run["config"]["decision_interval_steps"] == 10
+    assert 600 <= run["env_steps"] < 600 + 16 * 10 + 10  # at most one rollout of decisions over the budget
+    steps = [int(line.split(",")[0]) for line in (out / "progress.csv").read_text().splitlines()[1:]]
+    assert steps and steps[-1] == run["env_steps"]
+    result = run_cli("train", BASELINES / "hrl.py", "--terrain", "rough", "--out", tmp_path / "bad",
+                     "--set", "decision_interval_steps=0")
+    assert result.exit_code != 0 and "decision_interval_steps must be an integer >= 1" in result.output
+    assert not (tmp_path / "bad").exists()
+
+
 def test_initial_action_of_the_wrong_size_or_algo_is_one_line(tmp_path):
     out = tmp_path / "run"
     result = run_cli("train", BASELINES / "hrl.py", "--terrain", "rough", "--out", out, "--set", "initial_action=(0.5,)")

@@ -11,6 +11,8 @@ Every config has these fields, read here and by hexbench.training (settings, env
     log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
     action_noise_std (optional; TD3, SAC) std of Gaussian exploration noise added to actions
     initial_action (optional; PPO) the policy's mean action before training (hexbench.training.warm_start)
+    decision_interval_steps (optional, default 1) the policy decides every K control steps and its
+                   action is held between, in training and in evaluation (hexbench.training.wrappers)
 
 and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
 
@@ -43,7 +45,7 @@ ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
                                            "log_std_init", "action_noise_std", "early_end_penalty",
-                                           "normalize_reward", "initial_action"})
+                                           "normalize_reward", "initial_action", "decision_interval_steps"})
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
 # [rad/s] are divided by 5 to bring them to O(1) like the other groups (positions [rad], torques
@@ -76,6 +78,9 @@ def validate_config(config, where: str = "CONFIG") -> None:
         raise ConfigError(f"{where}: action_mode {config.action_mode!r} unknown; valid: {', '.join(ACTION_MODES)}")
     if config.activation not in ACTIVATIONS:
         raise ConfigError(f"{where}: activation {config.activation!r} unknown; valid: {', '.join(ACTIVATIONS)}")
+    interval = getattr(config, "decision_interval_steps", 1)
+    if not isinstance(interval, int) or isinstance(interval, bool) or interval < 1:
+        raise ConfigError(f"{where}: decision_interval_steps must be an integer >= 1 (control steps); got {interval!r}")
     initial_action = getattr(config, "initial_action", None)
     if initial_action is not None:
         n = action_dim(config.action_mode)
@@ -219,9 +224,14 @@ class PolicyController:
     """A trained SB3 policy behind the hexbench Controller protocol (deterministic actions)."""
 
     def __init__(self, action_mode: str, policy, checkpoint_sha256: str = "", checkpoint_path: Path | None = None,
-                 target_horizon_m: float | None = None):
+                 target_horizon_m: float | None = None, decision_interval_steps: int = 1):
         self.action_mode = action_mode
         self.policy = policy
+        # the policy decides every this many control steps and its action is held between (as it
+        # trained: hexbench.training.wrappers.DecisionInterval)
+        self.decision_interval_steps = max(1, int(decision_interval_steps))
+        self._held: np.ndarray | None = None
+        self._steps = 0
         # On a course longer than the training goal distance, the target the policy sees is held at
         # most this far ahead of the base (a waypoint on the way to the goal), as in training.
         self.target_horizon_m = target_horizon_m
@@ -229,10 +239,18 @@ class PolicyController:
         # the weights files behind this controller (result records list them with their sha256)
         self.checkpoint_paths = [Path(checkpoint_path)] if checkpoint_path is not None else []
 
-    def reset(self, seed: int) -> None:  # deterministic policy: nothing to reseed
-        pass
+    def reset(self, seed: int) -> None:  # deterministic policy: nothing to reseed; a new decision
+        self._held, self._steps = None, 0
 
     def act(self, obs: np.ndarray) -> np.ndarray:
+        if self.decision_interval_steps > 1:
+            if self._steps % self.decision_interval_steps == 0 or self._held is None:
+                self._held = self._decide(obs)
+            self._steps += 1
+            return self._held.copy()
+        return self._decide(obs)
+
+    def _decide(self, obs: np.ndarray) -> np.ndarray:
         if self.target_horizon_m is not None:
             obs = np.array(obs, copy=True)
             obs[TARGET_X_INDEX] = min(obs[TARGET_X_INDEX], obs[BASE_X_INDEX] + self.target_horizon_m)
@@ -355,4 +373,5 @@ def make_policy_controller(config, checkpoints_dir: Path, method: str, task,
     terrain = weights_terrain or POLICY_TERRAIN.get(task.terrain, task.terrain)
     path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
     policy = load_policy(config, path, entry["sha256"])
-    return PolicyController(config.action_mode, policy, entry["sha256"], path, waypoint_horizon_m(task.goal_distance_m))
+    return PolicyController(config.action_mode, policy, entry["sha256"], path, waypoint_horizon_m(task.goal_distance_m),
+                            getattr(config, "decision_interval_steps", 1))

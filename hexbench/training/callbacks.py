@@ -48,6 +48,12 @@ class TrainingMonitor(BaseCallback):
         self.last_csv = self.last_ckpt = self.t0
 
     def _on_step(self) -> bool:
+        # SB3 counts one step per decision; with actions held (DecisionInterval) a decision spends
+        # several control steps, and the budget, checkpoints and progress.csv count control steps
+        held = sum(int(info.get("decision_env_steps", 1)) - 1 for info in self.locals["infos"])
+        if held:
+            self.model.num_timesteps += held
+            self.num_timesteps = self.model.num_timesteps
         # raw Table 1 rewards, also when the learner sees normalised ones
         env = self.training_env
         rewards = env.get_original_reward() if hasattr(env, "get_original_reward") else self.locals["rewards"]

@@ -80,7 +80,8 @@ def play_episode(policy, config, terrain: str, level: float, seed: int) -> Episo
 
     suite = load_suite()
     task = suite.task(terrain, level)
-    actor = LocalActor(PolicyController(config.action_mode, policy))
+    actor = LocalActor(PolicyController(config.action_mode, policy,
+                                        decision_interval_steps=getattr(config, "decision_interval_steps", 1)))
     row = play(task, seed, actor, where="policy", residual_scale=config.residual_scale).row
     return EpisodeOutcome(row["success"], float(row["progress_m"]), row["end_reason"])
 

@@ -13,6 +13,14 @@
                       r_d > -1, that bounds the discounted loss of staying alive, so ending the
                       episode never pays.
 
+  DecisionInterval    the config option `decision_interval_steps` (not in the paper): the policy
+                      decides every K control steps and its action is held for K steps (summed
+                      reward, the last step's observation and info; `info["decision_env_steps"]`
+                      says how many control steps the decision took). For HRL: a policy asked
+                      for CPG parameters every 1/60 s learns to switch them bang-bang (the shipped
+                      HRL v4's hip amplitude A1 moves by 0.48 of its [-1, 1] range per control
+                      step on stairs 2 cm), which no longer makes the CPG's gait.
+
 `make_curriculum_env` is the entry point of the registered ids hexbench/<Terrain>-Curriculum-<Mode>-v1
 (hexbench.suite.tasks registers them by entry-point string).
 """
@@ -120,3 +128,24 @@ def make_curriculum_env(terrain: str, action_mode: str = "cpg_residual", *, resi
     env = HexapodEnv(terrain=terrain, action_mode=action_mode, residual_scale=residual_scale, **env_fields)
     env = CurriculumWrapper(env, curriculum or CURRICULA[terrain])
     return EarlyEndPenalty(env) if early_end_penalty else env
+
+
+class DecisionInterval(gym.Wrapper):
+    """One step = the action held for `steps` control steps (fewer if the episode ends first)."""
+
+    def __init__(self, env: gym.Env, steps: int):
+        if steps < 1:
+            raise ValueError(f"decision interval must be >= 1 control step (got {steps})")
+        super().__init__(env)
+        self.steps = int(steps)
+
+    def step(self, action):
+        total = 0.0
+        for taken in range(1, self.steps + 1):
+            obs, reward, terminated, truncated, info = self.env.step(action)
+            total += float(reward)
+            if terminated or truncated:
+                break
+        info = dict(info)
+        info["decision_env_steps"] = taken
+        return obs, total, terminated, truncated, info
