@@ -67,3 +67,27 @@ def test_label_names_gsde_a_warm_start_its_warm_up_and_own_curriculum(tmp_path):
     _, label, _ = load_progress(folder)
     assert "gSDE, matrix std 0.03, new every 120 steps" in label and "from ppo_cpg-rough at 180,502" in label
     assert "value warm-up 50,000" in label and "curriculum 18:0.5:21" in label
+
+
+def test_bands_average_the_seeds_of_a_recipe_with_a_t_interval_and_need_run_json(tmp_path):
+    import numpy as np
+    from scipy import stats
+
+    from hexbench.training.curves import plot_bands, seed_band
+
+    values = np.array([[1.0, 2.0, np.nan], [3.0, 4.0, 5.0], [5.0, 9.0, 7.0]])
+    mean, low, high = seed_band(values)
+    assert list(mean) == [3.0, 5.0, 6.0]  # the NaN (a shorter run) leaves the mean to the others
+    half = stats.t.ppf(0.975, 2) * np.std([1.0, 3.0, 5.0], ddof=1) / np.sqrt(3)
+    assert low[0] == pytest.approx(3.0 - half) and high[0] == pytest.approx(3.0 + half)
+    assert high[2] - low[2] == pytest.approx(2 * stats.t.ppf(0.975, 1) * np.std([5.0, 7.0], ddof=1) / np.sqrt(2))
+    one = seed_band(np.array([[1.0, 2.0]]))
+    assert list(one[0]) == [1.0, 2.0] and np.all(np.isnan(one[1]))  # one seed: no band
+
+    runs = [write_run(tmp_path / f"ppo_cpg-rough-seed{s}", "ppo_cpg", 100_000, [20_000, 60_000, 100_000])
+            for s in (1, 2)]
+    png = tmp_path / "bands.png"
+    assert plot_bands(runs, png) == [png] and png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    (runs[0] / "run.json").unlink()
+    with pytest.raises(CurvesError, match="no run.json beside its progress CSV"):
+        plot_bands(runs, png)

@@ -217,16 +217,19 @@ def register(app: typer.Typer) -> None:
         copy_csv: bool = typer.Option(True, "--copy-csv/--no-copy-csv", help="copy run CSVs next to the PNG"),
         max_env_steps: int | None = typer.Option(None, "--max-env-steps",
                                                  help="plot every run's first N env steps only (one budget)"),
+        bands: bool = typer.Option(False, "--bands", help="one line per method and recipe: the mean over its seeds "
+                                                          "with a 95% band (paper Fig. 4 over seeds)"),
     ) -> None:
         """Plot episode reward, success rate and curriculum level vs env steps (paper Fig. 4) from progress CSVs."""
         from rich.console import Console
 
         from hexbench.errors import HexbenchError
-        from hexbench.training.curves import plot_curves
+        from hexbench.training.curves import plot_bands, plot_curves
 
         console = Console(stderr=True)
         try:
-            written = plot_curves(sources, out, title, copy_csv, max_env_steps)
+            written = (plot_bands(sources, out, title, max_env_steps) if bands
+                       else plot_curves(sources, out, title, copy_csv, max_env_steps))
         except (HexbenchError, OSError, ValueError) as e:  # CurvesError, OutputError; pandas' parse errors
             typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None

@@ -72,23 +72,7 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
     if run:
         # the run directory's name (or its CSV copy's stem): runs of one method, terrain and seed
         # under different config revisions (docs/changelog.md: -v2, -v3, -v4) stay apart in the legend
-        label = source.resolve().name if source.is_dir() else source.stem
-        cfg = run.get("config") or {}
-        if cfg.get("log_std_init") is not None:
-            std = math.exp(cfg["log_std_init"])
-            # under gSDE the std is that of the exploration matrix's entries, held for sde_sample_freq steps
-            label += (f" (gSDE, matrix std {std:.2f}, new every {cfg.get('sde_sample_freq')} steps" if cfg.get("use_sde")
-                      else f" (std {std:.2f}")
-            label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
-        if run.get("init_from"):
-            label += f", from {run['init_from']['manifest_key']} at {run['init_from']['source_env_steps']:,}"
-        if run.get("value_warmup_steps"):
-            label += f", value warm-up {run['value_warmup_steps']:,}"
-        if run.get("curriculum_levels"):
-            c = run["curriculum_levels"]
-            label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
-        if not cfg.get("early_end_penalty", False):
-            label += ", no early-end penalty"  # the reward of Table 1 as written (docs/training.md)
+        label = (source.resolve().name if source.is_dir() else source.stem) + recipe_description(run)
         total = run.get("total_steps", 0)
         last = max(run.get("env_steps", 0), last_logged)
         if max_env_steps is None and (run.get("env_steps", 0) < total or last_logged < total):
@@ -100,6 +84,30 @@ def load_progress(source: Path, max_env_steps: int | None = None) -> tuple[pd.Da
     else:
         label = csv_path.stem
     return agg, label, run
+
+
+def recipe_description(run: dict) -> str:
+    """What of a run's recipe its label shows: exploration, reward scaling, warm start, options."""
+    label = ""
+    cfg = run.get("config") or {}
+    if cfg.get("log_std_init") is not None:
+        std = math.exp(cfg["log_std_init"])
+        # under gSDE the std is that of the exploration matrix's entries, held for sde_sample_freq steps
+        label += (f" (gSDE, matrix std {std:.2f}, new every {cfg.get('sde_sample_freq')} steps" if cfg.get("use_sde")
+                  else f" (std {std:.2f}")
+        label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
+    if (cfg.get("decision_interval_steps") or 1) != 1:
+        label += f", a decision every {cfg['decision_interval_steps']} control steps"
+    if run.get("init_from"):
+        label += f", from {run['init_from']['manifest_key']} at {run['init_from']['source_env_steps']:,}"
+    if run.get("value_warmup_steps"):
+        label += f", value warm-up {run['value_warmup_steps']:,}"
+    if run.get("curriculum_levels"):
+        c = run["curriculum_levels"]
+        label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
+    if not cfg.get("early_end_penalty", False):
+        label += ", no early-end penalty"  # the reward of Table 1 as written (docs/training.md)
+    return label
 
 
 def save_png(fig, out_png: Path) -> Path:
@@ -120,6 +128,14 @@ def save_png(fig, out_png: Path) -> Path:
 TRAINING_OPTION_KEYS: tuple[str, ...] = ("value_warmup_steps", "curriculum_levels", "fixed_level")
 
 
+def recipe_key(method: str, run: dict | None) -> tuple[str, str]:
+    """(method, recipe): runs that differ only in their seed share it."""
+    run = run or {}
+    recipe = {"config": run.get("config"), "init_sha256": (run.get("init_from") or {}).get("sha256"),
+              **{k: run.get(k) for k in TRAINING_OPTION_KEYS}}
+    return method, json.dumps(recipe, sort_keys=True)
+
+
 def line_styles(runs: list[tuple[str, dict | None]]) -> list[dict[str, str]]:
     """Colour and line style per (method, run.json) so that seeds read as a group: one colour per
     method and training recipe (config, warm-start source, value warm-up, curriculum or fixed level;
@@ -129,10 +145,7 @@ def line_styles(runs: list[tuple[str, dict | None]]) -> list[dict[str, str]]:
     group_colour: dict[tuple[str, str], str] = {}
     styles = []
     for method, run in runs:
-        run = run or {}
-        recipe = {"config": run.get("config"), "init_sha256": (run.get("init_from") or {}).get("sha256"),
-                  **{k: run.get(k) for k in TRAINING_OPTION_KEYS}}
-        group = (method, json.dumps(recipe, sort_keys=True))
+        group = recipe_key(method, run)
         if group not in group_colour:
             first_of_method = all(m != method for m, _ in group_colour)
             extra = sum(c in EXTRA_COLOURS for c in group_colour.values())
@@ -203,3 +216,93 @@ def plot_curves(sources: list[Path], out_png: Path, title: str = "", copy_csv: b
                 write_json_atomic(side, summary)
                 written += [dest, side]
     return written
+
+
+BAND_PANELS: tuple[tuple[str, str], ...] = (
+    ("mean_episode_reward", "mean episode reward\n(last 20 episodes per env)"),
+    ("success_rate", "success rate\n(last 20 episodes per env)"),
+    ("curriculum_level", "curriculum level\n(cm or deg)"),
+)
+
+
+def seed_band(values, confidence: float = 0.95):
+    """(mean, low, high) over seeds (rows) at each grid point (columns), NaN where a run has no data;
+    the interval is Student's t over the seeds present there (none with a single seed)."""
+    import numpy as np
+    from scipy import stats
+
+    values = np.asarray(values, dtype=float)
+    present = np.isfinite(values)
+    n = present.sum(axis=0)
+    filled = np.where(present, values, 0.0)
+    mean = np.where(n > 0, filled.sum(axis=0) / np.maximum(n, 1), np.nan)
+    squares = np.where(present, (values - mean) ** 2, 0.0).sum(axis=0)
+    sd = np.sqrt(squares / np.maximum(n - 1, 1))
+    half = np.where(n > 1, stats.t.ppf(0.5 + confidence / 2, np.maximum(n - 1, 1)) * sd / np.sqrt(np.maximum(n, 1)),
+                    np.nan)
+    return mean, mean - half, mean + half
+
+
+def plot_bands(sources: list[Path], out_png: Path, title: str = "", max_env_steps: int | None = None,
+               grid_points: int = 201) -> list[Path]:
+    """Paper Fig. 4 over seeds: per method and recipe, the mean over its seeds of reward, success rate
+    and curriculum level, with a 95% band (Student's t over seeds), against env steps.
+
+    Runs are grouped as `line_styles` groups them (method and recipe; seeds apart), so a source needs
+    its run.json (a run directory, or a CSV with its .run.json beside it). Each run is interpolated
+    onto a common env-step grid within the steps it logged, never beyond: a shorter run leaves the
+    mean to the others there. Legends name methods, recipes and seeds, never run directories.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    if not sources:
+        raise CurvesError("no runs given; pass run directories (training/...) or progress CSVs with their .run.json")
+    if max_env_steps is not None and max_env_steps <= 0:
+        raise CurvesError(f"--max-env-steps must be a positive number of env steps, got {max_env_steps}")
+    groups: dict[tuple[str, str], list[tuple[pd.DataFrame, dict]]] = {}
+    for source in sources:
+        agg, _label, run = load_progress(Path(source), max_env_steps)
+        if not run or not run.get("method"):
+            raise CurvesError(f"{source}: no run.json beside its progress CSV; --bands groups runs by the method "
+                              "and recipe in it")
+        if len(agg) == 0:
+            raise CurvesError(f"{source}: no progress rows" + (f" within {max_env_steps:,} env steps"
+                                                                if max_env_steps else ""))
+        groups.setdefault(recipe_key(run["method"], run), []).append((agg, run))
+    budget = max_env_steps or max(int(run.get("total_steps") or agg["env_steps"].max())
+                                  for members in groups.values() for agg, run in members)
+    grid = np.linspace(0, budget, grid_points)
+    fig, axes = plt.subplots(3, 1, figsize=(9, 10.5), sharex=True, height_ratios=(3, 2, 2))
+    styles = line_styles([key[:1] + (members[0][1],) for key, members in groups.items()])
+    for (key, members), style in zip(groups.items(), styles):
+        method, run0 = key[0], members[0][1]
+        seeds = sorted(run.get("seed") for _agg, run in members if run.get("seed") is not None)
+        label = f"{method}{recipe_description(run0)}: " + (
+            f"mean of {len(members)} seeds ({', '.join(str(s) for s in seeds)}), 95% band"
+            if len(members) > 1 else f"1 seed ({', '.join(str(s) for s in seeds)}), no band")
+        label = "\n".join(textwrap.wrap(label, LEGEND_LINE_CHARS))
+        for ax, (column, _ylabel) in zip(axes, BAND_PANELS):
+            values = np.array([np.where((grid >= agg["env_steps"].min()) & (grid <= agg["env_steps"].max()),
+                                        np.interp(grid, agg["env_steps"], agg[column]), np.nan)
+                               for agg, _run in members])
+            mean, low, high = seed_band(values)
+            ax.plot(grid, mean, color=style["color"], lw=1.8, label=label)
+            ax.fill_between(grid, low, high, color=style["color"], alpha=0.2, lw=0)
+    for ax, (_column, ylabel) in zip(axes, BAND_PANELS):
+        ax.set_ylabel(ylabel)
+        ax.grid(alpha=0.3)
+    axes[1].set_ylim(-0.03, 1.03)
+    axes[2].set_xlabel("env steps")
+    axes[2].set_xlim(0, budget)
+    labels = axes[0].get_legend_handles_labels()[1]
+    legend_in = LEGEND_LINE_IN * sum(label.count("\n") + 1 for label in labels) + 0.2
+    width_in, height_in = fig.get_size_inches()
+    fig.set_size_inches(width_in, height_in + legend_in)
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="lower left", fontsize=7, frameon=False)
+    fig.suptitle(title or "hexbench learning curves: mean over seeds, 95% band (Student's t)")
+    fig.tight_layout(rect=(0, legend_in / (height_in + legend_in), 1, 1))
+    return [save_png(fig, out_png)]
