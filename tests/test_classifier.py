@@ -88,7 +88,25 @@ def test_short_training_run_learns_and_cli_evaluates(tmp_path):
                                       "--out", str(tmp_path / "rep"), "--split", "all"])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "rep" / "ds-all-confusion.png").is_file()
-    assert json.loads((tmp_path / "rep" / "ds-all.json").read_text())["num_images"] == 30
+    report = json.loads((tmp_path / "rep" / "ds-all.json").read_text())
+    assert report["num_images"] == 30
+    # the train split is in "all": its 24 images are the classifier's own training images, and eval says so
+    assert report["training_overlap"]["images"] == 24 and len(meta["train_image_sha256"]) == 24
+    assert "24 of 30 evaluated images are byte-identical to images" in result.output
+    result = CliRunner().invoke(app, ["classifier", "eval", "--data", str(data), "--checkpoint", str(ckpt),
+                                      "--out", str(tmp_path / "rep")])
+    assert result.exit_code == 0 and "byte-identical" not in result.output  # the test split is held out
+    # weights whose sidecar predates the list: known through the manifest of their own dataset only
+    del meta["train_image_sha256"]
+    ckpt.with_suffix(".json").write_text(json.dumps(meta))
+    result = CliRunner().invoke(app, ["classifier", "eval", "--data", str(data), "--checkpoint", str(ckpt),
+                                      "--out", str(tmp_path / "rep"), "--split", "train"])
+    assert "24 of 24 evaluated images" in result.output and "training dataset's manifest" in result.output
+    other = tmp_path / "other"
+    build_terrain_images(other, BuildConfig(per_class=5, seed=12))
+    result = CliRunner().invoke(app, ["classifier", "eval", "--data", str(other), "--checkpoint", str(ckpt),
+                                      "--out", str(tmp_path / "rep")])
+    assert result.exit_code == 0 and "overlap with the training images not checked" in result.output
 
 
 def test_eval_rejects_bad_input(tmp_path):

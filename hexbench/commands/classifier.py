@@ -51,6 +51,7 @@ def register(app: typer.Typer) -> None:
             DEFAULT_CHECKPOINT,
             TrainConfig,
             evaluate,
+            image_sha256s,
             load_split,
             predict,
             save_checkpoint,
@@ -78,6 +79,8 @@ def register(app: typer.Typer) -> None:
             "dataset": {"path": str(data), "manifest_sha256": sha256_file(manifest) if manifest.is_file() else None,
                         "train_images": len(train_set.labels), "test_images": len(test_set.labels)},
             "final_train_loss": round(history["loss"][-1], 5),
+            # what `classifier eval` checks evaluated images against (no test on training images)
+            "train_image_sha256": sorted(set(image_sha256s(data, train_set.paths))),
             "evaluations": {"test_split": {"accuracy": report["accuracy"], "num_images": report["num_images"],
                                            "confusion": report["confusion"]}},
         }
@@ -103,6 +106,7 @@ def register(app: typer.Typer) -> None:
             plot_confusion,
             predict,
             sidecar_path,
+            training_overlap,
         )
 
         if split not in ("train", "test", "all"):
@@ -115,6 +119,14 @@ def register(app: typer.Typer) -> None:
             _fail(str(err))
         report = evaluate(images.labels, predict(model, images.images))
         report.update(data=str(data), split=split, checkpoint=str(checkpoint))
+        overlap, how = training_overlap(json.loads(sidecar_path(checkpoint).read_text()), data, images.paths)
+        report["training_overlap"] = {"images": None if overlap is None else len(overlap), "checked_against": how}
+        if overlap is None:
+            typer.secho(f"warning: overlap with the training images not checked: {how}", fg="yellow", err=True)
+        elif overlap:
+            typer.secho(f"warning: {len(overlap)} of {len(images.paths)} evaluated images are byte-identical to images "
+                        f"{checkpoint} trained on ({how}), e.g. {overlap[0]}; this accuracy is not a held-out test",
+                        fg="yellow", err=True)
         report["misclassified"] = [p for p, y, q in zip(images.paths, images.labels, predict(model, images.images)) if y != q]
         out.mkdir(parents=True, exist_ok=True)
         stem = f"{Path(data).name}-{split}"

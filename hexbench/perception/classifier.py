@@ -240,6 +240,34 @@ class ChecksumError(HexbenchError):
     """A checkpoint whose sha256 differs from the one recorded for it."""
 
 
+def image_sha256s(root: Path, paths: list[str]) -> list[str]:
+    """The sha256 of each image file (paths relative to `root`, as ImageSet.paths)."""
+    return [sha256_file(Path(root) / p) for p in paths]
+
+
+def training_overlap(sidecar: dict, root: Path, paths: list[str]) -> tuple[list[str] | None, str]:
+    """The evaluated images (paths under `root`) byte-identical to an image the classifier trained on,
+    and how that was known; None when the sidecar cannot tell (then the reason says why).
+
+    The training images are the sidecar's `train_image_sha256` (written by `classifier train`), or,
+    for weights trained before it was written, the train split of the dataset manifest the sidecar
+    names by its sha256, when the evaluated folder's manifest is that one."""
+    trained = sidecar.get("train_image_sha256")
+    source = "the sidecar's train_image_sha256"
+    if trained is None:
+        from hexbench.perception.dataset.build import MANIFEST_NAME
+
+        manifest = Path(root) / MANIFEST_NAME
+        recorded = (sidecar.get("dataset") or {}).get("manifest_sha256")
+        if not (recorded and manifest.is_file() and sha256_file(manifest) == recorded):
+            return None, ("its sidecar lists no training images and this folder is not its training dataset "
+                          "(manifest sha256 differs)")
+        trained = [f["sha256"] for f in json.loads(manifest.read_text())["files"] if f.get("split") == "train"]
+        source = "the train split of its training dataset's manifest"
+    trained = set(trained)
+    return [p for p, h in zip(paths, image_sha256s(root, paths)) if h in trained], source
+
+
 def sidecar_path(checkpoint: Path) -> Path:
     return Path(checkpoint).with_suffix(".json")
 
