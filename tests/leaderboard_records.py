@@ -23,15 +23,17 @@ PAPER_REFERENCE = Path(__file__).resolve().parent.parent / "leaderboard" / "pape
 
 def synthetic_record(label: str, capability: dict[str, float], seed: int, *, protocol: str = "v1",
                      episodes: int | None = None, slope_width: float = 0.6, courses: bool = False,
-                     terrains: tuple[str, ...] | None = None) -> dict:
+                     terrains: tuple[str, ...] | None = None, levels: dict | None = None) -> dict:
     """A measured record whose success probability falls from 1 to 0 around `capability[terrain]`
-    (of the full run, or with courses=True of the extra courses; `terrains`: of those alone)."""
+    (of the full run, or with courses=True of the extra courses; `terrains` or `levels`: of those alone)."""
     suite = load_suite(protocol)
     rng = np.random.default_rng(seed)
     rows = []
     tasks = suite.extra_tasks if courses else suite.tasks
     if terrains is not None:
         tasks = tuple(t for t in tasks if t.terrain in terrains)
+    if levels is not None:  # {terrain: levels}: those tasks alone
+        tasks = tuple(t for t in tasks if t.level in levels.get(t.terrain, ()))
     for task in tasks:
         p = 1.0 / (1.0 + math.exp((task.level - capability[task.terrain]) / slope_width))
         for index, ep_seed in enumerate(task.seeds(episodes)):

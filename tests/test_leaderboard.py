@@ -639,3 +639,25 @@ def test_hostile_course_record_strings_render_as_literal_text(tmp_path):
     cells = {c.strip() for c in data.get("td", [])}
     assert _one_line("# " + HOSTILE) in cells and _one_line(HOSTILE_FILE) in cells
     assert _one_line("# " + HOSTILE) + ": " + _one_line(HOSTILE_COMMAND) in {li.strip() for li in data["li"]}
+
+
+def test_table5_records_show_beside_the_papers_row_on_the_courses_page(tmp_path):
+    from hexbench.leaderboard.courses import PAPER_TABLE_5
+
+    board = tmp_path / "board"
+    (board / "courses" / "table5").mkdir(parents=True)
+    for terrain, capability in (("slopes", 13.5), ("stairs", 6.2)):
+        record = synthetic_record("ppo_cpg_rough_model", {terrain: capability}, 21,
+                                  levels={terrain: tuple(PAPER_TABLE_5[terrain])})
+        (board / "courses" / "table5" / f"rough_model-{terrain}.json").write_text(json.dumps(record))
+    result = lb.build(board)
+    assert not result.errors, result.errors
+    text = (board / "courses" / "README.md").read_text()
+    assert "## Paper Table 5: the rough terrain model on slopes and stairs" in text
+    assert "| paper Table 5 (reported, not run here) | 100% | 100% | 100% | 100% | 40% | 0% |" in text
+    assert text.count("| ppo_cpg_rough_model |") == 2  # one row per terrain
+    # a level outside Table 5 is refused with the valid tasks named; the other record still shows
+    wrong = synthetic_record("other", {"slopes": 12.0}, 22, levels={"slopes": (6.0,)})
+    (board / "courses" / "table5" / "wrong.json").write_text(json.dumps(wrong))
+    errors = lb.build(board).errors
+    assert len(errors) == 1 and "slopes 6 is not a paper Table 5 task; valid: slopes 10, 11" in errors[0]

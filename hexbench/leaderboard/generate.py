@@ -12,7 +12,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-from hexbench.leaderboard.courses import COURSES_DIR, load_course_rows, render_courses_readme
+from hexbench.leaderboard.courses import COURSES_DIR, TABLE5_DIR, load_course_rows, load_table5_rows, render_courses_readme
 from hexbench.leaderboard.html_page import render_html
 from hexbench.leaderboard.ranking import Board, make_board
 from hexbench.leaderboard.readme import render_readme
@@ -82,7 +82,13 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
         course_load = load_course_rows(courses, protocol)
         errors += course_load.errors
         skipped += course_load.skipped
-        files[courses / "README.md"] = render_courses_readme(course_load.rows, board.suite)
+        table5 = None
+        if (courses / TABLE5_DIR).is_dir():
+            table5_load = load_table5_rows(courses / TABLE5_DIR, protocol)
+            errors += table5_load.errors
+            skipped += table5_load.skipped
+            table5 = table5_load.rows
+        files[courses / "README.md"] = render_courses_readme(course_load.rows, board.suite, table5)
     seeds = root / SEEDS_DIR if seeds is None else Path(seeds)
     if seeds.is_dir():
         seed_load = load_seed_runs(seeds, protocol)

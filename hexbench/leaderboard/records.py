@@ -199,13 +199,15 @@ def _measured_details(record: dict, tier: str) -> dict:
     }
 
 
-def measured_row(record: dict, where: str, course: bool = False, terrains_covered: bool = False) -> Row:
+def measured_row(record: dict, where: str, course: bool = False, terrains_covered: bool = False,
+                 levels_covered: bool = False) -> Row:
     """Validate a measured record (see module docstring) and return its row; RecordError if refused.
 
     course=True validates a record of the extra courses (every seed of every level of the courses
     it covers) instead of the full run; terrains_covered=True a record of some of the full run's
     terrains (every seed of every level of each terrain it covers: a seed run's
-    `hexbench run FILE --terrain T` record, hexbench.leaderboard.seeds).
+    `hexbench run FILE --terrain T` record, hexbench.leaderboard.seeds); levels_covered=True a record
+    of some levels of the full run (every seed of each level it covers: paper Table 5's tasks).
     """
     check_schema(record, where)
     if record["kind"] != "measured":
@@ -215,6 +217,9 @@ def measured_row(record: dict, where: str, course: bool = False, terrains_covere
     if course:
         covered = {e["terrain"] for e in record["episodes"]}
         tasks = tuple(t for t in suite.extra_tasks if t.terrain in covered) or suite.extra_tasks
+    elif levels_covered:
+        covered = {(e["terrain"], format_level(e["level"])) for e in record["episodes"]}
+        tasks = tuple(t for t in suite.tasks if (t.terrain, format_level(t.level)) in covered) or suite.tasks
     elif terrains_covered:
         covered = {e["terrain"] for e in record["episodes"]}
         tasks = tuple(t for t in suite.tasks if t.terrain in covered) or suite.tasks
