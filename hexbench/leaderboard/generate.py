@@ -88,7 +88,7 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
             errors += table5_load.errors
             skipped += table5_load.skipped
             table5 = table5_load.rows
-        files[courses / "README.md"] = render_courses_readme(course_load.rows, board.suite, table5)
+        files[courses / "README.md"] = render_courses_readme(course_load.rows, board.suite, table5, board.measured)
     seeds = root / SEEDS_DIR if seeds is None else Path(seeds)
     if seeds.is_dir():
         seed_load = load_seed_runs(seeds, protocol)
