@@ -156,3 +156,13 @@ def _edit_manifest(folder: Path, change) -> None:
     manifest = json.loads(path.read_text())
     change(next(iter(manifest["checkpoints"].values())))
     path.write_text(json.dumps(manifest))
+
+
+def test_a_trained_run_without_its_record_yet_is_listed_not_refused(repo_like):
+    board, seeds = repo_like
+    (seeds / "ppo_cpg-rough-seed2" / "result-rough.json").unlink()
+    result = lb.build(board)
+    assert not result.errors
+    text = (board / "seeds" / "README.md").read_text()
+    assert "## Trained, not yet scored" in text and "\n- ppo_cpg-rough-seed2\n" in text
+    assert "| ppo_cpg @ 1M env steps | 3 (1, 3, 4) |" in text

@@ -95,7 +95,8 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
         errors += seed_load.errors
         skipped += seed_load.skipped
         aggregates = aggregate(seed_load.runs + reference_runs(board.measured, board.suite.terrains), board.suite)
-        page = render_seeds_page(aggregates, improvements(aggregates), board.suite, seed_load.errors)
+        page = render_seeds_page(aggregates, improvements(aggregates), board.suite, seed_load.errors,
+                                 seed_load.unscored)
         (directory / SEEDS_PAGE_DIR).mkdir(exist_ok=True)
         files.update({directory / SEEDS_PAGE_DIR / name: text for name, text in page.items()})
     write_all_atomically(files)

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import json
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -112,6 +112,7 @@ class SeedLoad:
     runs: list[SeedRun]
     errors: list[str]  # one line per refused seed run
     skipped: list[str]  # one line per record of another protocol
+    unscored: list[str] = field(default_factory=list)  # folders without their result-<terrain>.json yet
 
 
 def fmt_budget(env_steps: int) -> str:
@@ -175,6 +176,10 @@ def load_seed_runs(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> SeedLoa
     """Every seed-run folder under `directory` (name order): the valid runs, a line per refused one."""
     result = SeedLoad([], [], [])
     for folder in sorted(p for p in Path(directory).iterdir() if p.is_dir() and not p.name.startswith(".")):
+        match = _FOLDER.match(folder.name)
+        if match and not (folder / f"result-{match['terrain']}.json").exists():
+            result.unscored.append(folder.name)  # trained (checkpoint committed), its record not made yet
+            continue
         try:
             run = read_seed_run(folder, protocol)
         except RecordError as e:

@@ -133,7 +133,7 @@ def _trained_on(aggregates: list[seed_runs.TerrainAggregate], terrain: str) -> b
 
 
 def render_seeds_page(aggregates: list[seed_runs.TerrainAggregate], found: list[seed_runs.Improvement],
-                      suite: Suite, errors: list[str]) -> dict[str, str]:
+                      suite: Suite, errors: list[str], unscored: list[str] = ()) -> dict[str, str]:
     """README.md and each terrain's figure, as {file name: text}."""
     colors = _colors(aggregates)
     out = [f"# hexbench across seeds: protocol {suite.protocol}\n",
@@ -168,6 +168,12 @@ def render_seeds_page(aggregates: list[seed_runs.TerrainAggregate], found: list[
             out.append(_improvement_table(terrain_improvements) + "\n")
         out.append("Runs:\n")
         out.append(_runs_table(shown, terrain, unit) + "\n")
+    if unscored:
+        out.append("## Trained, not yet scored\n")
+        out.append("Seed-run folders whose checkpoint is committed but whose `result-<terrain>.json` is not made yet "
+                   "(they count once scored):\n")
+        out += [f"- {md_text(name, block=True)}" for name in unscored]
+        out.append("")
     if errors:
         out.append("## Refused seed runs\n")
         out += [f"- {md_text(e, block=True)}" for e in errors]
