@@ -166,3 +166,21 @@ def test_a_trained_run_without_its_record_yet_is_listed_not_refused(repo_like):
     text = (board / "seeds" / "README.md").read_text()
     assert "## Trained, not yet scored" in text and "\n- ppo_cpg-rough-seed2\n" in text
     assert "| ppo_cpg @ 1M env steps | 3 (1, 3, 4) |" in text
+
+
+def test_adding_a_run_to_one_method_leaves_the_other_methods_intervals_alone(repo_like):
+    _, seeds = repo_like
+    suite = load_suite("v1")
+
+    def ppo_interval():
+        aggregates = seed_runs.aggregate(seed_runs.load_seed_runs(seeds).runs, suite)
+        ppo = next(a for a in aggregates if a.method.label == "ppo")
+        return ppo.all_levels, next(a for a in aggregates if a.method.label == "ppo_cpg").runs
+
+    write_seed_run(seeds, "ppo", "rough", 2, 6.5)  # two runs: an interval that is not a point
+    before, cpg_runs_before = ppo_interval()
+    assert before.low < before.high
+    write_seed_run(seeds, "ppo_cpg", "rough", 5, 10.2)
+    after, cpg_runs_after = ppo_interval()
+    assert len(cpg_runs_after) == len(cpg_runs_before) + 1
+    assert (after.value, after.low, after.high) == (before.value, before.low, before.high)

@@ -24,8 +24,10 @@ paper levels (headroom levels left out, as in the AUC). From it (hexbench.leader
                       levels, with its CI; shown for the reference method over every other one
 
 Reference controllers without training (the open-loop CPG) take part with their one full-run
-record from the leaderboard folder: one run, no interval of their own. Bootstrap intervals use a
-generator seeded with BOOTSTRAP_SEED, so a build is deterministic.
+record from the leaderboard folder: one run, no interval of their own. Every bootstrap interval
+uses a generator of its own, seeded with BOOTSTRAP_SEED and the (terrain, method[, other method])
+it describes, so a build is deterministic and adding a run to one method leaves every other
+method's intervals as they were.
 """
 
 from __future__ import annotations
@@ -200,10 +202,17 @@ def reference_runs(rows: list[Row] | tuple[Row, ...], terrains: tuple[str, ...])
 
 
 # ----------------------------------------------------------------------------- aggregating
+def bootstrap_generator(terrain: str, *methods: Method) -> np.random.Generator:
+    """The generator of one interval: BOOTSTRAP_SEED and a stable hash of what the interval describes."""
+    import zlib
+
+    key = "/".join([terrain, *(f"{m.label}@{m.budget_env_steps}" for m in methods)])
+    return np.random.default_rng([BOOTSTRAP_SEED, zlib.crc32(key.encode())])
+
+
 def aggregate(runs: list[SeedRun], suite: Suite) -> list[TerrainAggregate]:
     """One aggregate per (terrain, method), in terrain order, then trained methods by label and budget,
     then the references."""
-    rng = np.random.default_rng(BOOTSTRAP_SEED)
     groups: dict[tuple[str, Method], list[SeedRun]] = {}
     for run in runs:
         groups.setdefault((run.terrain, Method(run.method, run.budget_env_steps)), []).append(run)
@@ -219,6 +228,7 @@ def aggregate(runs: list[SeedRun], suite: Suite) -> list[TerrainAggregate]:
         levels = tuple(suite.levels(terrain, include_headroom=False))
         scores = np.array([r.scores(list(levels)) for r in members])
         aucs = np.array([[r.row.terrain(terrain)["auc"]] for r in members])
+        rng = bootstrap_generator(terrain, method)
         out.append(TerrainAggregate(
             method=method, terrain=terrain, runs=members, levels=levels, scores=scores,
             per_level=tuple(statistics.iqm(scores[:, [i]], rng) for i in range(len(levels))),
@@ -228,10 +238,10 @@ def aggregate(runs: list[SeedRun], suite: Suite) -> list[TerrainAggregate]:
 
 def improvements(aggregates: list[TerrainAggregate], of: str = IMPROVEMENT_OF) -> list[Improvement]:
     """P(`of` > every other method) per terrain over the level scores, for each budget of `of`."""
-    rng = np.random.default_rng(BOOTSTRAP_SEED + 1)
     out = []
     for better in (a for a in aggregates if a.method.label == of):
         for other in (a for a in aggregates if a.terrain == better.terrain and a.method != better.method):
+            rng = bootstrap_generator(better.terrain, better.method, other.method)
             out.append(Improvement(better.terrain, better.method, other.method,
                                    statistics.probability_of_improvement_interval(better.scores, other.scores, rng)))
     return out
