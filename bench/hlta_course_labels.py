@@ -1,16 +1,19 @@
-"""How well the terrain classifier labels the mixed course while the robot walks it.
+"""How well a terrain classifier labels the mixed course while the robot walks it (issue: HLTA).
 
-The terrain-image dataset photographs each obstacle from the flat approach in front of it; on the
-mixed course the HLTA layer sees terrain from everywhere along the way (on rough ground, on a
-ramp, from the slope's top). This walks the open-loop CPG (a_r = 0) over the course and, every
-`--every` control steps, renders the evaluator's camera image (same camera, painting and period
+Walks the open-loop CPG (a_r = 0) over the mixed course on the protocol's own episode seeds
+(`hexbench run --terrain mixed` uses the same ones; the terrain-images dataset draws its walks
+from other seeds, so these terrains are unseen by the classifier) and, every `--every` control
+steps, renders the evaluator's camera image (same camera, `CAMERA_GROUND_RGB` painting and period
 as `hexbench run`), classifies it, and compares the label with the segment the camera looks at:
-the course segment under the point `--lookahead` m ahead of the base (rough before the middle of
-the rough-slope gap, slopes before the middle of the slope-stairs gap, stairs after).
+the course segment under the point `--lookahead` m ahead of the base
+(`hexbench.world.terrain.mixed_segment_at`: rough before the middle of the rough-slope gap,
+slopes before the middle of the slope-stairs gap, stairs after), the label rule of the dataset's
+mixed-course walk views.
 
-    .venv/bin/python experiments/hlta_course_labels.py [--levels 1,2,3] [--episodes 3] [--json out.json]
+    .venv/bin/python bench/hlta_course_labels.py [--checkpoint PT] [--levels 1,2,3] [--episodes 20] \\
+        [--json out.json] [--figure confusion.png]
 
-Prints per-segment accuracy and the confusion counts (rows: truth, columns: label).
+Prints accuracy, per-segment recall and the confusion counts (rows: truth, columns: label).
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import time
 from pathlib import Path
 
 import numpy as np
@@ -25,69 +29,68 @@ import numpy as np
 REPO = Path(__file__).resolve().parent.parent
 
 
-def truth_at(x_m: float) -> str:
-    from hexbench.world.terrain import MIXED_ROUGH_END_X_M, MIXED_SLOPE_START_X_M, MIXED_STAIRS_START_X_M, SlopesTerrain
-
-    slope_end = SlopesTerrain(10.0, start_x_m=MIXED_SLOPE_START_X_M).breakpoints_m[3]
-    if x_m < (MIXED_ROUGH_END_X_M + MIXED_SLOPE_START_X_M) / 2:
-        return "rough"
-    if x_m < (slope_end + MIXED_STAIRS_START_X_M) / 2:
-        return "slopes"
-    return "stairs"
-
-
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--checkpoint", type=Path, default=REPO / "baselines" / "checkpoints" / "terrain_classifier.pt")
     parser.add_argument("--levels", default="1,2,3")
-    parser.add_argument("--episodes", type=int, default=3, help="episodes per level (protocol seeds 0..N-1)")
-    parser.add_argument("--every", type=int, default=30, help="control steps between images")
+    parser.add_argument("--episodes", type=int, default=20, help="episodes per level (protocol seeds 0..N-1)")
+    parser.add_argument("--every", type=int, default=30, help="control steps between images (the evaluator: 30)")
     parser.add_argument("--lookahead", type=float, default=0.4, help="[m] ahead of the base that the label refers to")
-    parser.add_argument("--json", default=None)
+    parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--figure", type=Path, default=None, help="confusion-matrix PNG")
     args = parser.parse_args()
 
     import torch
 
-    from hexbench.perception.classifier import load_classifier, predict
+    from hexbench.artifacts.files import sha256_file
+    from hexbench.perception.classifier import evaluate, load_classifier, plot_confusion, predict
     from hexbench.perception.views import TERRAIN_CAMERA, TERRAIN_CLASSES, paint_terrain
     from hexbench.suite.controller import CAMERA_GROUND_RGB
     from hexbench.suite.tasks import load_suite
     from hexbench.world.camera import robot_camera_image
     from hexbench.world.env import HexapodEnv
+    from hexbench.world.terrain import mixed_segment_at
 
     torch.set_num_threads(1)
-    model = load_classifier(REPO / "baselines" / "checkpoints" / "terrain_classifier.pt")
+    model = load_classifier(args.checkpoint)
     suite = load_suite("v1")
-    confusion = {t: {c: 0 for c in TERRAIN_CLASSES} for t in TERRAIN_CLASSES}
+    truths, labels = [], []
+    start = time.perf_counter()
     for level in [float(v) for v in args.levels.split(",")]:
         task = suite.task("mixed", level)
         env = HexapodEnv(task.env_config("cpg_residual"))
         for seed in task.seeds(args.episodes):
             env.reset(seed=seed)
             paint_terrain(env.sim, CAMERA_GROUND_RGB)
-            step, done = 0, False
+            images, step, done = [], 0, False
             while not done:
                 if step % args.every == 0:
                     x = float(env.robot_state.base_pos_m[0])
-                    image = robot_camera_image(env.sim, TERRAIN_CAMERA)
-                    label = TERRAIN_CLASSES[int(predict(model, image[None])[0])]
-                    confusion[truth_at(x + args.lookahead)][label] += 1
+                    images.append(robot_camera_image(env.sim, TERRAIN_CAMERA))
+                    truths.append(TERRAIN_CLASSES.index(mixed_segment_at(x + args.lookahead)))
                 _, _, terminated, truncated, _ = env.step(np.zeros(18, np.float32))
                 done = terminated or truncated
                 step += 1
+            labels.extend(predict(model, np.stack(images)).tolist())
         env.close()
-    per_segment = {t: {"images": sum(row.values()), "accuracy": row[t] / max(1, sum(row.values()))}
-                   for t, row in confusion.items()}
-    total = sum(v["images"] for v in per_segment.values())
+    report = evaluate(np.array(truths), np.array(labels))
     out = {
+        "checkpoint": str(args.checkpoint), "checkpoint_sha256": sha256_file(args.checkpoint),
         "levels": args.levels, "episodes_per_level": args.episodes, "every_steps": args.every,
-        "lookahead_m": args.lookahead, "images": total,
-        "accuracy": sum(confusion[t][t] for t in TERRAIN_CLASSES) / max(1, total),
-        "per_segment": per_segment, "confusion_truth_by_label": confusion, "machine": platform.platform(),
+        "lookahead_m": args.lookahead, "images": report["num_images"], "accuracy": report["accuracy"],
+        "recall_per_segment": {k: v["recall"] for k, v in report["per_class"].items()},
+        "support_per_segment": {k: v["support"] for k, v in report["per_class"].items()},
+        "confusion_truth_by_label": report["confusion"], "classes": report["classes"],
+        "wall_time_s": round(time.perf_counter() - start, 1), "machine": platform.platform(),
     }
     text = json.dumps(out, indent=2)
     print(text)
     if args.json:
-        Path(args.json).write_text(text + "\n")
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(text + "\n")
+    if args.figure:
+        plot_confusion(report, args.figure, f"classifier along the mixed course, levels {args.levels}, "
+                                            f"{args.episodes} protocol seeds each")
 
 
 if __name__ == "__main__":

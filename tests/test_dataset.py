@@ -292,3 +292,92 @@ def test_shipped_registry_is_well_formed():
     entry = load_registry()["terrain-images"]
     assert len(entry.sha256) == 64 and entry.size_bytes > 0 and entry.urls
     assert entry.archive == f"terrain-images-{entry.version}.tar.gz"
+
+
+# ------------------------------------------------------------------------------ version 2: walk views
+
+from hexbench.perception.dataset.walks import WALK_KINDS, WalkConfig, plan_walks  # noqa: E402
+
+TINY_WALKS = WalkConfig(walks_per_terrain=2, mixed_walks=2, image_every_steps=60, max_steps_single=150,
+                        max_steps_mixed=150)
+TINY_V2 = BuildConfig(per_class=5, seed=3, version=2, walks=TINY_WALKS)
+
+
+@pytest.fixture(scope="module")
+def tiny_v2_build(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("ds2") / "terrain-images"
+    build_terrain_images(out, TINY_V2)
+    return out
+
+
+def test_version_2_adds_walk_views_labelled_and_counted(tiny_v2_build, tiny_build):
+    manifest = json.loads((tiny_v2_build / "manifest.json").read_text())
+    assert manifest["version"] == "2.0.0" and verify_build(tiny_v2_build) == []
+    walk_rows = [f for f in manifest["files"] if f["view_kind"] == "walk"]
+    approach = [f for f in manifest["files"] if f["view_kind"] == "approach"]
+    # the approach views are version 1's images, byte for byte
+    assert {f["path"]: f["sha256"] for f in approach} == _sha_map(tiny_build)
+    # 150 steps from a phase in [0, 60): 2 or 3 images per walk, 2 walks per kind
+    assert {f["walk_kind"] for f in walk_rows} == set(WALK_KINDS) and 16 <= len(walk_rows) <= 24
+    for f in walk_rows:
+        assert f["path"].split("/")[:2] == [f["split"], f["label"]]
+        if f["walk_kind"] == "mixed":
+            from hexbench.world.terrain import mixed_segment_at
+
+            assert f["label"] == mixed_segment_at(f["base_x_m"] + f["lookahead_m"])
+        else:
+            assert f["label"] == f["walk_kind"] and f["label_rule"] == "walk terrain"
+    by_kind = manifest["counts_by_view_kind"]
+    for split, per_label in manifest["counts"].items():
+        for label, n in per_label.items():
+            assert sum(kinds[label] for kinds in by_kind[split].values()) == n
+    assert sum(by_kind["test"]["walk-mixed"].values()) > 0 or sum(by_kind["train"]["walk-mixed"].values()) > 0
+
+
+def test_version_2_is_reproducible(tiny_v2_build, tmp_path):
+    again = tmp_path / "again"
+    build_terrain_images(again, TINY_V2)
+    assert (again / "manifest.json").read_bytes() == (tiny_v2_build / "manifest.json").read_bytes()
+
+
+def test_walk_split_is_by_walk_without_leakage():
+    walks = plan_walks(0, WalkConfig())
+    for kind in WALK_KINDS:
+        mine = [w for w in walks if w.kind == kind]
+        test = [w for w in mine if w.split == "test"]
+        assert len(test) == round(0.2 * len(mine))
+        assert {w.episode_seed for w in test}.isdisjoint({w.episode_seed for w in mine if w.split == "train"})
+    assert {w.episode_seed for w in plan_walks(1, WalkConfig())}.isdisjoint({w.episode_seed for w in walks})
+
+
+def test_walk_seeds_are_not_protocol_episode_seeds():
+    from hexbench.suite.tasks import load_suite
+
+    suite = load_suite("v1")
+    protocol = {s for t in suite.all_tasks for s in t.seeds()}
+    assert protocol.isdisjoint({w.episode_seed for w in plan_walks(0, WalkConfig())})
+
+
+def test_unknown_version_is_refused_with_the_valid_ones(tmp_path):
+    result = CliRunner().invoke(app, ["dataset", "build", "terrain-images", "--version", "3",
+                                      "--out", str(tmp_path / "x")])
+    assert result.exit_code == 2 and "valid versions: 1, 2" in result.output
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_registry_keeps_every_major_version_downloadable(tiny_build, tiny_v2_build, server, tmp_path):
+    www, url = server
+    entries = {}
+    for build, version in ((tiny_build, "1.0.0"), (tiny_v2_build, "2.0.0")):
+        archive = pack_build(build, tmp_path / "dist" / f"terrain-images-{version}.tar.gz", f"terrain-images-{version}")
+        (www / archive.name).write_bytes(archive.read_bytes())
+        entry = registry_entry_for(archive, "terrain-images", version, (f"{url}/{archive.name}",))
+        entries[entry.key] = entry
+    assert sorted(entries) == ["terrain-images", "terrain-images@2"]
+    registry = tmp_path / "registry.toml"
+    write_registry(entries, registry)
+    cache = tmp_path / "cache"
+    assert download("terrain-images", registry_path=registry, cache_dir=cache) == cache / "terrain-images-2.0.0"
+    assert download("terrain-images", version=1, registry_path=registry, cache_dir=cache) == cache / "terrain-images-1.0.0"
+    with pytest.raises(DownloadError, match="no registered version 3; registered versions: 1, 2"):
+        download("terrain-images", version=3, registry_path=registry, cache_dir=cache)

@@ -226,3 +226,20 @@ def test_mixed_course_is_rough_then_slope_then_stairs(client: int, level: int) -
 def test_unknown_mixed_level_names_the_valid_ones() -> None:
     with pytest.raises(ValueError, match="valid levels: 1, 2, 3"):
         make_terrain("mixed", 4)
+
+
+def test_mixed_segment_splits_the_flat_gaps_at_their_middles() -> None:
+    from hexbench.world.terrain import (
+        MIXED_ROUGH_END_X_M,
+        MIXED_SLOPE_START_X_M,
+        MIXED_STAIRS_START_X_M,
+        SlopesTerrain,
+        mixed_segment_at,
+    )
+
+    slope_end = SlopesTerrain(14.0, start_x_m=MIXED_SLOPE_START_X_M).breakpoints_m[3]
+    first_gap_middle = (MIXED_ROUGH_END_X_M + MIXED_SLOPE_START_X_M) / 2
+    second_gap_middle = (slope_end + MIXED_STAIRS_START_X_M) / 2
+    assert [mixed_segment_at(x) for x in (0.0, 1.0, first_gap_middle - 1e-6)] == ["rough"] * 3
+    assert [mixed_segment_at(x) for x in (first_gap_middle + 1e-6, 3.0, second_gap_middle - 1e-6)] == ["slopes"] * 3
+    assert [mixed_segment_at(x) for x in (second_gap_middle + 1e-6, 5.0, 9.0)] == ["stairs"] * 3

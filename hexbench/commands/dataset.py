@@ -29,6 +29,7 @@ def register(app: typer.Typer) -> None:
               per_class: int = typer.Option(200, "--per-class", help="images per terrain class (paper: 200)"),
               out: Path = typer.Option(Path("build/terrain-images"), "--out", help="output folder"),
               seed: int = typer.Option(0, "--seed", help="dataset seed (fixes every terrain, pose and colour)"),
+              version: int = typer.Option(2, "--version", help="2: approach + walk views (default); 1: approach views only"),
               force: bool = typer.Option(False, "--force", help="replace an existing output folder")) -> None:
         """Render the dataset from the robot camera: {train,test}/{rough,slopes,stairs}/*.png + manifest.json."""
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
@@ -37,12 +38,13 @@ def register(app: typer.Typer) -> None:
 
         _check_name(name)
         try:
-            config = BuildConfig(per_class=per_class, seed=seed)
+            config = BuildConfig(per_class=per_class, seed=seed, version=version)
         except ValueError as err:
             _fail(str(err))
-        columns = (TextColumn("rendering"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn())
+        columns = (TextColumn("rendering (approach images, then walks)"), BarColumn(), MofNCompleteColumn(),
+                   TimeRemainingColumn())
         with Progress(*columns) as progress:
-            task = progress.add_task("render", total=3 * per_class)
+            task = progress.add_task("render", total=3 * per_class + len(config.planned_walks))
             try:
                 manifest = build_terrain_images(out, config, force=force,
                                                 on_image=lambda done, total: progress.update(task, completed=done))
@@ -50,7 +52,8 @@ def register(app: typer.Typer) -> None:
                 _fail(str(err))
         counts = manifest["counts"]
         typer.echo(f"wrote {len(manifest['files'])} images to {out} "
-                   f"(train {sum(counts['train'].values())}, test {sum(counts['test'].values())}; seed {seed})")
+                   f"(train {sum(counts['train'].values())}, test {sum(counts['test'].values())}; "
+                   f"version {manifest['version']}, seed {seed})")
 
     @group.command("verify")
     def verify(folder: Path = typer.Argument(..., help="a build or downloaded dataset folder")) -> None:
@@ -99,6 +102,7 @@ def register(app: typer.Typer) -> None:
     @group.command("download")
     def download(name: str = typer.Argument(..., help="dataset name: terrain-images"),
                  url: Optional[str] = typer.Option(None, "--url", help="fetch from this URL instead of the registry's mirrors"),
+                 version: Optional[int] = typer.Option(None, "--version", help="major version (default: the highest registered)"),
                  registry: Optional[Path] = typer.Option(None, "--registry", help="registry TOML (default datasets/registry.toml)"),
                  data_dir: Optional[Path] = typer.Option(None, "--data-dir", help="cache folder (default $HEXBENCH_DATA_DIR or the user cache)")) -> None:
         """Download the published archive with pooch, verify its sha256 and extract it safely."""
@@ -107,7 +111,7 @@ def register(app: typer.Typer) -> None:
 
         _check_name(name)
         try:
-            folder = fetch(name, registry_path=registry, cache_dir=data_dir, url=url, progressbar=True)
+            folder = fetch(name, version=version, registry_path=registry, cache_dir=data_dir, url=url, progressbar=True)
         except DownloadError as err:
             _fail(str(err))
         typer.echo(str(folder))
@@ -144,7 +148,7 @@ def register(app: typer.Typer) -> None:
         typer.echo(entry.toml(), nl=False)
         if update_registry:
             entries = load_registry() if REGISTRY_PATH.is_file() else {}
-            entries[name] = entry
+            entries[entry.key] = entry
             header = REGISTRY_PATH.read_text().split("[", 1)[0] if REGISTRY_PATH.is_file() else ""
             write_registry(entries, header=header)
             typer.echo(f"# updated {REGISTRY_PATH}")

@@ -49,6 +49,18 @@ MIXED_GOAL_DISTANCE_M = 6.3  # 0.6 m onto the top step
 MIXED_END_X_M = 7.3  # terrain extent beyond the start [m]
 
 
+def mixed_segment_at(x_m: float) -> str:
+    """The mixed-course segment ("rough", "slopes", "stairs") that x [m] belongs to: the flat gaps
+    are split at their middles (rough before 1.85 m, slopes before 4.35 m, stairs after). The
+    slope's end (4.2 m) does not depend on its angle: its ramps have a fixed horizontal run."""
+    slope_end_x_m = MIXED_SLOPE_START_X_M + 2 * SlopesTerrain.ramp_run_m + SlopesTerrain.top_length_m
+    if x_m < (MIXED_ROUGH_END_X_M + MIXED_SLOPE_START_X_M) / 2:
+        return "rough"
+    if x_m < (slope_end_x_m + MIXED_STAIRS_START_X_M) / 2:
+        return "slopes"
+    return "stairs"
+
+
 class Terrain(Protocol):
     kind: str
 

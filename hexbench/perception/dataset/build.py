@@ -2,9 +2,14 @@
 
 Layout of a build directory:
 
-  train/{rough,slopes,stairs}/*.png   80% of the terrain instances of each class
-  test/{rough,slopes,stairs}/*.png    the other 20% (no terrain instance appears in both)
-  manifest.json                       config, camera, and per file: sha256, split, class, instance, pose
+  train/{rough,slopes,stairs}/*.png   80% of the terrain instances (and, version 2, walks) of each kind
+  test/{rough,slopes,stairs}/*.png    the other 20% (no terrain instance or walk appears in both)
+  manifest.json                       config, camera, and per file: sha256, split, class, view kind, pose
+
+Version 1 (`--version 1`) holds the approach views only: `<class>_<instance>_<view>.png`, the robot
+standing on the flat ground before the obstacle. Version 2 holds the same approach views plus the
+walk views of `walks.py` (`walk-<kind>_<walk>_<step>.png`, filed under their label), taken while
+the open-loop CPG walks each terrain and the mixed course; its split is by walk (terrain seed).
 
 Everything is a pure function of the seed: instance k of class c draws its level, colour, terrain
 seed and poses from `np.random.default_rng([seed, c, k])`, and which instances are test instances
@@ -28,6 +33,7 @@ import numpy as np
 
 from hexbench.artifacts.files import sha256_bytes, sha256_file
 from hexbench.perception.dataset import DATASET_NAME
+from hexbench.perception.dataset.walks import WALK_KINDS, WalkConfig, plan_walks, render_walks
 from hexbench.perception.views import (
     LEVEL_RANGES,
     TERRAIN_CAMERA,
@@ -39,7 +45,8 @@ from hexbench.perception.views import (
     sample_views,
 )
 
-DATASET_VERSION = "1.0.0"
+DATASET_VERSIONS: dict[int, str] = {1: "1.0.0", 2: "2.0.0"}  # --version -> the manifest's version
+VIEW_KINDS: tuple[str, ...] = ("approach", "walk")
 MANIFEST_NAME = "manifest.json"
 SPLITS: tuple[str, ...] = ("train", "test")
 SPLIT_STREAM = 1_000_003  # rng stream id for the train/test assignment
@@ -52,14 +59,34 @@ class BuildConfig:
     views_per_instance: int = 5  # camera poses per terrain instance (fewer for tiny builds)
     test_fraction: float = 0.2
     poses: PoseRanges = PoseRanges()
+    version: int = 1  # 1: approach views only; 2: approach views + walk views
+    walks: WalkConfig = WalkConfig()  # version 2 only
 
     def __post_init__(self) -> None:
+        if self.version not in DATASET_VERSIONS:
+            raise ValueError(f"unknown terrain-images version {self.version}; valid versions: "
+                             f"{', '.join(str(v) for v in DATASET_VERSIONS)}")
         if self.per_class < 2:
             raise ValueError(f"--per-class must be at least 2 (one train and one test instance), got {self.per_class}")
         if self.seed < 0:
             raise ValueError(f"--seed must be >= 0, got {self.seed}")
         if not 0.0 < self.test_fraction < 1.0:
             raise ValueError(f"test fraction must be in (0, 1), got {self.test_fraction}")
+
+    @property
+    def dataset_version(self) -> str:
+        return DATASET_VERSIONS[self.version]
+
+    @property
+    def planned_walks(self) -> list:
+        return plan_walks(self.seed, self.walks) if self.version >= 2 else []
+
+    def manifest_config(self) -> dict:
+        config = asdict(self)
+        if self.version < 2:
+            del config["walks"]  # version 1 manifests stay byte-identical to earlier builds
+            del config["version"]
+        return config
 
     @property
     def effective_views_per_instance(self) -> int:
@@ -130,31 +157,46 @@ def build_terrain_images(out_dir: Path, config: BuildConfig = BuildConfig(), *, 
     out_dir.parent.mkdir(parents=True, exist_ok=True)
     planned = plan_images(config)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.tmp-", dir=out_dir.parent))
+    walks = config.planned_walks
+    total = len(planned) + len(walks)  # progress units: one per approach image, one per walk
     sim = Simulation()
     try:
         files = []
-        for i, item in enumerate(planned):
-            data = png_bytes(render_view(sim, item.view))
-            path = tmp / item.relpath
+
+        def write(relpath: str, image: np.ndarray, row: dict) -> None:
+            data = png_bytes(image)
+            path = tmp / relpath
             path.parent.mkdir(parents=True, exist_ok=True)
             path.write_bytes(data)
-            files.append({"path": item.relpath, "sha256": sha256_bytes(data), "bytes": len(data),
-                          "split": item.split, "label": item.terrain, "instance": item.instance_index,
-                          "view_index": item.view_index, **item.view.record()})
+            files.append({"path": relpath, "sha256": sha256_bytes(data), "bytes": len(data), **row})
+
+        for i, item in enumerate(planned):
+            row = {"split": item.split, "label": item.terrain, "instance": item.instance_index,
+                   "view_index": item.view_index, **item.view.record()}
+            if config.version >= 2:
+                row["view_kind"] = "approach"
+            write(item.relpath, render_view(sim, item.view), row)
             if on_image is not None:
-                on_image(i + 1, len(planned))
+                on_image(i + 1, total)
+        for shot in render_walks(walks, config.walks, on_walk=None if on_image is None else
+                                 (lambda done, _n: on_image(len(planned) + done, total))):
+            rel = f"{shot.walk.split}/{shot.label}/{shot.walk.name}_{shot.step:05d}.png"
+            write(rel, shot.image, {"split": shot.walk.split, "label": shot.label,
+                                    **shot.record(config.walks.lookahead_m)})
         manifest = {
             "name": DATASET_NAME,
-            "version": DATASET_VERSION,
+            "version": config.dataset_version,
             "hexbench_version": __version__,
             "classes": list(TERRAIN_CLASSES),
             "level_ranges": {k: list(v) for k, v in LEVEL_RANGES.items()},
-            "config": asdict(config),
+            "config": config.manifest_config(),
             "camera": asdict(TERRAIN_CAMERA),
             "counts": {s: {t: sum(1 for f in files if f["split"] == s and f["label"] == t) for t in TERRAIN_CLASSES}
                        for s in SPLITS},
             "files": files,
         }
+        if config.version >= 2:
+            manifest["counts_by_view_kind"] = view_kind_counts(files)
         (tmp / MANIFEST_NAME).write_text(json.dumps(manifest, indent=1, sort_keys=True) + "\n")
         if out_dir.exists():
             trash = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.old-", dir=out_dir.parent))
@@ -169,6 +211,20 @@ def build_terrain_images(out_dir: Path, config: BuildConfig = BuildConfig(), *, 
         raise
     finally:
         sim.close()
+
+
+def view_kind_counts(files: list[dict]) -> dict:
+    """{split: {view kind (approach, walk-rough, ..., walk-mixed): {label: images}}} of manifest rows."""
+    kinds = ["approach", *(f"walk-{k}" for k in WALK_KINDS)]
+    out: dict = {}
+    for split in SPLITS:
+        out[split] = {}
+        for kind in kinds:
+            rows = [f for f in files if f["split"] == split and
+                    (f.get("view_kind", "approach") == "approach" if kind == "approach"
+                     else f.get("walk_kind") == kind.removeprefix("walk-"))]
+            out[split][kind] = {t: sum(1 for f in rows if f["label"] == t) for t in TERRAIN_CLASSES}
+    return out
 
 
 def load_manifest(build_dir: Path) -> dict:

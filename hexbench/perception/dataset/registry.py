@@ -9,6 +9,14 @@ The registry is `datasets/registry.toml`, one table per dataset:
   size_bytes = 1234567
   urls = ["https://...", "https://..."]   # mirrors, tried in order
 
+  ["terrain-images@2"]                    # another major version of the same dataset
+  version = "2.0.0"
+  ...
+
+A table's key is the dataset name for major version 1 and `<name>@<major>` for the others, so
+every version stays downloadable (`hexbench dataset download terrain-images --version 1`);
+without --version the highest registered major version is fetched.
+
 Cache: `$HEXBENCH_DATA_DIR` if set, else pooch's per-user cache (`pooch.os_cache("hexbench")`).
 The archive lands there as `<archive>` and is extracted to `<name>-<version>/`; every extracted
 file is then checked against the dataset's own manifest. `$HEXBENCH_DATASET_URL` (or `--url`)
@@ -45,13 +53,28 @@ class RegistryEntry:
     size_bytes: int
     urls: tuple[str, ...]
 
+    @property
+    def major(self) -> int:
+        return int(self.version.split(".", 1)[0])
+
+    @property
+    def key(self) -> str:
+        """The registry table of this entry: the name (major version 1) or `name@major`."""
+        return registry_key(self.name, self.major)
+
     def toml(self) -> str:
         urls = ", ".join(f'"{u}"' for u in self.urls)
-        return (f"[{self.name}]\nversion = \"{self.version}\"\narchive = \"{self.archive}\"\n"
+        header = self.key if self.major == 1 else f'"{self.key}"'
+        return (f"[{header}]\nversion = \"{self.version}\"\narchive = \"{self.archive}\"\n"
                 f"sha256 = \"{self.sha256}\"\nsize_bytes = {self.size_bytes}\nurls = [{urls}]\n")
 
 
+def registry_key(name: str, major: int) -> str:
+    return name if major == 1 else f"{name}@{major}"
+
+
 def load_registry(path: Path | None = None) -> dict[str, RegistryEntry]:
+    """Entries by table key (`name` or `name@major`)."""
     import tomllib
 
     path = Path(path) if path is not None else REGISTRY_PATH
@@ -62,12 +85,16 @@ def load_registry(path: Path | None = None) -> dict[str, RegistryEntry]:
     except tomllib.TOMLDecodeError as err:
         raise DownloadError(f"dataset registry {path} is not valid TOML: {err}") from None
     entries = {}
-    for name, t in tables.items():
+    for key, t in tables.items():
+        name = key.split("@", 1)[0]
         try:
-            entries[name] = RegistryEntry(name, str(t["version"]), str(t["archive"]), str(t["sha256"]).lower(),
+            entries[key] = RegistryEntry(name, str(t["version"]), str(t["archive"]), str(t["sha256"]).lower(),
                                           int(t["size_bytes"]), tuple(t["urls"]))
         except (KeyError, TypeError, ValueError) as err:
-            raise DownloadError(f"dataset registry {path}: entry [{name}] lacks or mangles {err}") from None
+            raise DownloadError(f"dataset registry {path}: entry [{key}] lacks or mangles {err}") from None
+        if key != entries[key].key:
+            raise DownloadError(f"dataset registry {path}: entry [{key}] holds version {entries[key].version}; "
+                                f"its table must be [{entries[key].key}]")
     return entries
 
 
@@ -78,18 +105,25 @@ def data_dir() -> Path:
     return Path(env).expanduser() if env else Path(pooch.os_cache("hexbench"))
 
 
-def download(name: str, *, registry_path: Path | None = None, cache_dir: Path | None = None,
-             url: str | None = None, progressbar: bool = False) -> Path:
-    """Fetch, verify and extract dataset `name`; return the folder holding its files."""
+def download(name: str, *, version: int | None = None, registry_path: Path | None = None,
+             cache_dir: Path | None = None, url: str | None = None, progressbar: bool = False) -> Path:
+    """Fetch, verify and extract dataset `name` (major `version`, default the highest registered);
+    return the folder holding its files."""
     import pooch
 
     from hexbench.perception.dataset.archive import ArchiveError, safe_extract
     from hexbench.perception.dataset.build import verify_build
 
     registry = load_registry(registry_path)
-    if name not in registry:
-        raise DownloadError(f"unknown dataset {name!r}; registered: {', '.join(sorted(registry)) or '(none)'}")
-    entry = registry[name]
+    versions = {e.major: e for e in registry.values() if e.name == name}
+    if not versions:
+        names = sorted({e.name for e in registry.values()})
+        raise DownloadError(f"unknown dataset {name!r}; registered: {', '.join(names) or '(none)'}")
+    if version is not None and version not in versions:
+        raise DownloadError(f"dataset {name!r} has no registered version {version}; registered versions: "
+                            f"{', '.join(str(v) for v in sorted(versions))} (build it with "
+                            f"`hexbench dataset build {name} --version {version}`)")
+    entry = versions[max(versions) if version is None else version]
     cache = Path(cache_dir) if cache_dir is not None else data_dir()
     cache.mkdir(parents=True, exist_ok=True)
     target = cache / f"{entry.name}-{entry.version}"
@@ -144,5 +178,5 @@ def registry_entry_for(archive: Path, name: str, version: str, urls: tuple[str, 
 
 def write_registry(entries: dict[str, RegistryEntry], path: Path | None = None, header: str = "") -> None:
     path = Path(path) if path is not None else REGISTRY_PATH
-    text = header + "\n".join(entries[n].toml() for n in sorted(entries))
+    text = header + "\n".join(entries[k].toml() for k in sorted(entries))
     write_text_atomic(path, text)
