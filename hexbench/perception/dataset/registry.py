@@ -90,6 +90,7 @@ def load_registry(path: Path | None = None) -> dict[str, RegistryEntry]:
         try:
             entries[key] = RegistryEntry(name, str(t["version"]), str(t["archive"]), str(t["sha256"]).lower(),
                                           int(t["size_bytes"]), tuple(t["urls"]))
+            entries[key].major  # noqa: B018  (a version that does not start with an integer is refused here)
         except (KeyError, TypeError, ValueError) as err:
             raise DownloadError(f"dataset registry {path}: entry [{key}] lacks or mangles {err}") from None
         if key != entries[key].key:
