@@ -44,10 +44,10 @@ def main() -> None:
 
     from hexbench.artifacts.files import sha256_file
     from hexbench.perception.classifier import evaluate, load_classifier, plot_confusion, predict
-    from hexbench.perception.views import TERRAIN_CAMERA, TERRAIN_CLASSES, paint_terrain
+    from hexbench.perception.dataset.walks import cpg_camera_shots
+    from hexbench.perception.views import TERRAIN_CLASSES, paint_terrain
     from hexbench.suite.controller import CAMERA_GROUND_RGB
     from hexbench.suite.tasks import load_suite
-    from hexbench.world.camera import robot_camera_image
     from hexbench.world.env import HexapodEnv
     from hexbench.world.terrain import mixed_segment_at
 
@@ -62,15 +62,10 @@ def main() -> None:
         for seed in task.seeds(args.episodes):
             env.reset(seed=seed)
             paint_terrain(env.sim, CAMERA_GROUND_RGB)
-            images, step, done = [], 0, False
-            while not done:
-                if step % args.every == 0:
-                    x = float(env.robot_state.base_pos_m[0])
-                    images.append(robot_camera_image(env.sim, TERRAIN_CAMERA))
-                    truths.append(TERRAIN_CLASSES.index(mixed_segment_at(x + args.lookahead)))
-                _, _, terminated, truncated, _ = env.step(np.zeros(18, np.float32))
-                done = terminated or truncated
-                step += 1
+            images = []
+            for _, state, image in cpg_camera_shots(env, args.every):
+                images.append(image)
+                truths.append(TERRAIN_CLASSES.index(mixed_segment_at(float(state.base_pos_m[0]) + args.lookahead)))
             labels.extend(predict(model, np.stack(images)).tolist())
         env.close()
     report = evaluate(np.array(truths), np.array(labels))

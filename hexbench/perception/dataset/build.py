@@ -46,7 +46,6 @@ from hexbench.perception.views import (
 )
 
 DATASET_VERSIONS: dict[int, str] = {1: "1.0.0", 2: "2.0.0"}  # --version -> the manifest's version
-VIEW_KINDS: tuple[str, ...] = ("approach", "walk")
 MANIFEST_NAME = "manifest.json"
 SPLITS: tuple[str, ...] = ("train", "test")
 SPLIT_STREAM = 1_000_003  # rng stream id for the train/test assignment
@@ -215,15 +214,11 @@ def build_terrain_images(out_dir: Path, config: BuildConfig = BuildConfig(), *, 
 
 def view_kind_counts(files: list[dict]) -> dict:
     """{split: {view kind (approach, walk-rough, ..., walk-mixed): {label: images}}} of manifest rows."""
-    kinds = ["approach", *(f"walk-{k}" for k in WALK_KINDS)]
-    out: dict = {}
-    for split in SPLITS:
-        out[split] = {}
-        for kind in kinds:
-            rows = [f for f in files if f["split"] == split and
-                    (f.get("view_kind", "approach") == "approach" if kind == "approach"
-                     else f.get("walk_kind") == kind.removeprefix("walk-"))]
-            out[split][kind] = {t: sum(1 for f in rows if f["label"] == t) for t in TERRAIN_CLASSES}
+    out = {split: {kind: dict.fromkeys(TERRAIN_CLASSES, 0)
+                   for kind in ("approach", *(f"walk-{k}" for k in WALK_KINDS))} for split in SPLITS}
+    for f in files:
+        kind = f"walk-{f['walk_kind']}" if f.get("view_kind") == "walk" else "approach"
+        out[f["split"]][kind][f["label"]] += 1
     return out
 
 

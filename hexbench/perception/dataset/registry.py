@@ -88,14 +88,15 @@ def load_registry(path: Path | None = None) -> dict[str, RegistryEntry]:
     for key, t in tables.items():
         name = key.split("@", 1)[0]
         try:
-            entries[key] = RegistryEntry(name, str(t["version"]), str(t["archive"]), str(t["sha256"]).lower(),
-                                          int(t["size_bytes"]), tuple(t["urls"]))
-            entries[key].major  # noqa: B018  (a version that does not start with an integer is refused here)
+            entry = RegistryEntry(name, str(t["version"]), str(t["archive"]), str(t["sha256"]).lower(),
+                                  int(t["size_bytes"]), tuple(t["urls"]))
+            expected_key = entry.key  # ValueError for a version that does not start with an integer
         except (KeyError, TypeError, ValueError) as err:
             raise DownloadError(f"dataset registry {path}: entry [{key}] lacks or mangles {err}") from None
-        if key != entries[key].key:
-            raise DownloadError(f"dataset registry {path}: entry [{key}] holds version {entries[key].version}; "
-                                f"its table must be [{entries[key].key}]")
+        if key != expected_key:
+            raise DownloadError(f"dataset registry {path}: entry [{key}] holds version {entry.version}; "
+                                f"its table must be [{expected_key}]")
+        entries[key] = entry
     return entries
 
 

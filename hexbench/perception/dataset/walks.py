@@ -28,7 +28,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from hexbench.perception.views import LEVEL_RANGES, TERRAIN_CAMERA, TERRAIN_CLASSES, paint_terrain
+from hexbench.perception.views import TERRAIN_CAMERA, TERRAIN_CLASSES, paint_terrain
 
 WALK_KINDS: tuple[str, ...] = (*TERRAIN_CLASSES, "mixed")
 WALK_STREAM = 2_000_003  # rng stream id of the walks (the approach views use [seed, class, instance])
@@ -138,11 +138,26 @@ def walk_env_config(walk: Walk, config: WalkConfig):
                      init_yaw_jitter_rad=config.start_yaw_jitter_mixed_rad if mixed else config.start_yaw_jitter_rad)
 
 
+def cpg_camera_shots(env, every_steps: int, phase_steps: int = 0, camera=TERRAIN_CAMERA) -> Iterator[tuple]:
+    """Walk a freshly reset `env` with the open-loop CPG (a_r = 0) until its episode ends, yielding
+    (control step, robot state, camera image) at `phase_steps` and every `every_steps` after it.
+    The one camera loop of the walk views and of bench/hlta_course_labels.py."""
+    from hexbench.world.camera import robot_camera_image
+
+    zero = np.zeros(env.action_space.shape, np.float32)
+    step, done = 0, False
+    while not done:
+        if step >= phase_steps and (step - phase_steps) % every_steps == 0:
+            yield step, env.robot_state, robot_camera_image(env.sim, camera)
+        _, _, terminated, truncated, _ = env.step(zero)
+        done = terminated or truncated
+        step += 1
+
+
 def walk_images(walk: Walk, config: WalkConfig) -> Iterator[WalkImage]:
     """Run the walk and yield its images in step order."""
     import math
 
-    from hexbench.world.camera import robot_camera_image
     from hexbench.world.env import HexapodEnv
     from hexbench.world.terrain import mixed_segment_at
 
@@ -150,18 +165,11 @@ def walk_images(walk: Walk, config: WalkConfig) -> Iterator[WalkImage]:
     try:
         env.reset(seed=walk.episode_seed)
         paint_terrain(env.sim, walk.ground_rgb)
-        zero = np.zeros(env.action_space.shape, np.float32)
-        step, done = 0, False
-        while not done:
-            if step >= walk.image_phase_steps and (step - walk.image_phase_steps) % config.image_every_steps == 0:
-                state = env.sim.state()
-                x, y = float(state.base_pos_m[0]), float(state.base_pos_m[1])
-                yaw = float(state.values[63])
-                label = mixed_segment_at(x + config.lookahead_m) if walk.kind == "mixed" else walk.kind
-                yield WalkImage(walk, step, x, y, math.degrees(yaw), label, robot_camera_image(env.sim, TERRAIN_CAMERA))
-            _, _, terminated, truncated, _ = env.step(zero)
-            done = terminated or truncated
-            step += 1
+        for step, state, image in cpg_camera_shots(env, config.image_every_steps, walk.image_phase_steps):
+            x, y = float(state.base_pos_m[0]), float(state.base_pos_m[1])
+            yaw = float(state.values[63])
+            label = mixed_segment_at(x + config.lookahead_m) if walk.kind == "mixed" else walk.kind
+            yield WalkImage(walk, step, x, y, math.degrees(yaw), label, image)
     finally:
         env.close()
 
