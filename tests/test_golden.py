@@ -2,7 +2,8 @@
 
 The physics is deterministic, so an episode of the open-loop CPG and of the shipped PPO-CPG, played
 by today's code through the sandbox, must give the row the committed record holds, field for field.
-A refactor that changes any outcome fails here.
+A refactor that changes any outcome fails here, and so does a machine whose CPU makes the policy
+multiply differently (the records were made on AMD EPYC machines; hexbench/suite/numerics.py).
 """
 
 import json

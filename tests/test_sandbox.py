@@ -97,6 +97,20 @@ def test_the_controller_sees_only_a_scratch_folder_a_clean_environment_and_no_ne
     assert not (tmp_path / "planted.txt").exists() and not Path("scratch-file").exists()
 
 
+@pytest.mark.parametrize("isolation", ["auto", "process"])
+def test_the_controller_multiplies_with_the_same_kernel_on_every_cpu(tmp_path, isolation):
+    """oneMKL picks its float32 kernel by CPU unless capped; the controller process is capped before
+    it multiplies anything (hexbench.suite.numerics), so a policy's actions are the same bits on an
+    AVX-512 Intel and an AMD machine (tests/test_golden.py replays episodes recorded on AMD)."""
+    path = controller(tmp_path, '''
+        import os
+        def check(self):
+            assert os.environ.get("MKL_ENABLE_INSTRUCTIONS") == "SSE4_2", os.environ.get("MKL_ENABLE_INSTRUCTIONS")
+            assert os.environ.get("OMP_NUM_THREADS") == "1"
+        ''')
+    assert run_episode(short_job(path, isolation, steps=2))["steps"] == 2
+
+
 def test_reset_gets_a_derived_seed_never_the_episode_seed(tmp_path):
     path = controller(tmp_path, '''
         def check(self):

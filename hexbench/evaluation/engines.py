@@ -40,6 +40,7 @@ from hexbench.evaluation import sandbox
 from hexbench.evaluation.episode import run_episode
 from hexbench.evaluation.workers import exit_when_orphaned, pin_to_core, worker_init
 from hexbench.suite.controller import ControllerError
+from hexbench.suite.numerics import use_controller_math
 
 ENGINES: tuple[str, ...] = ("local", "ray")
 RAY_INSTALL = "pip install 'hexbench[ray]'"
@@ -356,19 +357,13 @@ def _worker_setup() -> str:
     scratch folder for episode files."""
     if "scratch" in _WORKER:
         return _WORKER["scratch"]
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    use_controller_math()
     scratch, core = _claim_worker_folder()
     atexit.register(shutil.rmtree, scratch, True)
     atexit.register(sandbox.close_all)
     threading.Thread(target=exit_when_orphaned, args=(os.getppid(),), daemon=True, name="orphan-watchdog").start()
     if core is not None:
         os.sched_setaffinity(0, {core})
-    try:
-        import torch
-
-        torch.set_num_threads(1)
-    except ImportError:
-        pass
     _WORKER["scratch"] = scratch
     return scratch
 

@@ -15,6 +15,7 @@ from hexbench.evaluation.isolation import DEFAULT_LIMITS, Limits
 from hexbench.evaluation.remote import NotAnArray, WrongDtype, one_line
 from hexbench.suite.controller import CAMERA_EVERY_STEPS, ControllerError
 from hexbench.suite.controller import make_controller as make_in_process
+from hexbench.suite.numerics import use_controller_math
 
 
 # ------------------------------------------------------------------------ in-process (debug)
@@ -27,6 +28,7 @@ class InProcessController:
 
     def __init__(self, controller_file: str, task, limits: Limits = DEFAULT_LIMITS):
         self.file, self.limits = str(controller_file), limits
+        use_controller_math()  # in effect where this process has not multiplied matrices yet (a CLI run)
         self.ctrl = make_in_process(controller_file, task)
         self.action_mode = self.ctrl.action_mode
         self.checkpoint_paths = [Path(p).resolve() for p in getattr(self.ctrl, "checkpoint_paths", []) or []]

@@ -22,6 +22,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from hexbench.errors import HexbenchError
+from hexbench.suite.numerics import CONTROLLER_MATH_ENV
 
 ISOLATIONS: tuple[str, ...] = ("bubblewrap", "process", "none")
 SANDBOX_UID = 65534  # nobody
@@ -188,7 +189,7 @@ def bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = (
 
 def clean_env(home: str) -> dict[str, str]:
     env = {"PATH": "/usr/local/bin:/usr/bin:/bin", "HOME": home, "TMPDIR": home, "LANG": "C.UTF-8",
-           "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1"}
+           **CONTROLLER_MATH_ENV}
     if os.environ.get("HEXBENCH_TASKS_DIR"):
         env["HEXBENCH_TASKS_DIR"] = os.environ["HEXBENCH_TASKS_DIR"]
     return env

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from hexbench.evaluation import sandbox
+from hexbench.suite.numerics import use_controller_math
 
 
 def exit_when_orphaned(parent_pid: int, poll_s: float = 1.0) -> None:
@@ -27,18 +28,12 @@ def worker_init(parent_pid: int, next_core=None) -> None:
 
     threading.Thread(target=exit_when_orphaned, args=(parent_pid,), daemon=True, name="orphan-watchdog").start()
     util.Finalize(None, sandbox.close_all, exitpriority=10)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    use_controller_math()  # an in-process controller acts here; sandboxed ones inherit the pin
     if next_core is not None:
         with next_core.get_lock():
             slot = next_core.value
             next_core.value += 1
         pin_to_core(slot)
-    try:
-        import torch
-
-        torch.set_num_threads(1)
-    except ImportError:
-        pass
 
 
 def pin_to_core(slot: int | None = None) -> set[int] | None:
