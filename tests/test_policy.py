@@ -83,3 +83,41 @@ def test_a_decision_interval_holds_each_decision_for_that_many_steps_and_resets_
     ctrl.reset(1)
     ctrl.act(obs)
     assert len(policy.seen) == 4  # a new episode starts with a new decision
+
+
+@pytest.mark.parametrize("method", ["sac", "sac_cpg", "td3", "td3_cpg"])
+def test_off_policy_critics_have_their_own_smaller_network_and_the_actor_keeps_table_2s(method):
+    import torch
+
+    from hexbench.agents.policy import build_policy
+
+    config = load_controller_module(REPO / "baselines" / f"{method}.py").CONFIG
+    policy = build_policy(config)
+
+    def hidden_sizes(module) -> list[int]:  # every linear layer but the outputs (action: 18, Q: 1)
+        return [m.out_features for m in module.modules() if isinstance(m, torch.nn.Linear) and m.out_features not in (1, 18)]
+
+    assert hidden_sizes(policy.actor) == [256, 256, 256, 256]
+    assert [hidden_sizes(q) for q in policy.critic.q_networks] == [[256, 256], [256, 256]]
+    assert config.train_freq == 4 and config.gradient_steps == 1
+
+
+def test_a_critic_network_is_refused_where_there_is_no_separate_critic():
+    from dataclasses import replace
+
+    from hexbench.agents.policy import ConfigError, validate_config
+
+    ppo = load_controller_module(REPO / "baselines" / "ppo_cpg.py").CONFIG
+    with pytest.raises(ConfigError, match="critic_net_arch is for algo 'sac' or 'td3'"):
+        validate_config(replace(ppo, critic_net_arch=(64,)) if hasattr(ppo, "critic_net_arch") else _with_critic(ppo))
+    sac = load_controller_module(REPO / "baselines" / "sac_cpg.py").CONFIG
+    with pytest.raises(ConfigError, match="positive layer sizes"):
+        validate_config(replace(sac, critic_net_arch=(256, 0)))
+
+
+def _with_critic(config):
+    """A copy of a config dataclass with a critic_net_arch field added."""
+    from dataclasses import asdict, make_dataclass
+
+    cls = make_dataclass("WithCritic", [(k, object) for k in asdict(config)] + [("critic_net_arch", object)], frozen=True)
+    return cls(**asdict(config), critic_net_arch=(64,))

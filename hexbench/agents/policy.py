@@ -5,7 +5,8 @@ Every config has these fields, read here and by hexbench.training (settings, env
 
     algo           "ppo", "sac" or "td3" (the Stable-Baselines3 class)
     action_mode    "joint", "cpg_residual" or "cpg_params" (see hexbench.world.env)
-    net_arch       hidden layer sizes, e.g. (256, 256, 256, 256) (actor and critic alike)
+    net_arch       hidden layer sizes, e.g. (256, 256, 256, 256) (the policy; the critic too unless below)
+    critic_net_arch (optional; SAC, TD3) the critics' hidden layer sizes when they differ from net_arch
     activation     "relu" or "tanh"
     residual_scale eps of eq. 6 (None: the terrain default of paper 3.2)
     log_std_init   (optional; PPO and SAC) initial log std of the Gaussian policy
@@ -45,7 +46,8 @@ ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
                                            "log_std_init", "action_noise_std", "early_end_penalty",
-                                           "normalize_reward", "initial_action", "decision_interval_steps"})
+                                           "normalize_reward", "initial_action", "decision_interval_steps",
+                                           "critic_net_arch"})
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
 # [rad/s] are divided by 5 to bring them to O(1) like the other groups (positions [rad], torques
@@ -78,6 +80,12 @@ def validate_config(config, where: str = "CONFIG") -> None:
         raise ConfigError(f"{where}: action_mode {config.action_mode!r} unknown; valid: {', '.join(ACTION_MODES)}")
     if config.activation not in ACTIVATIONS:
         raise ConfigError(f"{where}: activation {config.activation!r} unknown; valid: {', '.join(ACTIVATIONS)}")
+    critic = getattr(config, "critic_net_arch", None)
+    if critic is not None:
+        if config.algo not in ("sac", "td3"):
+            raise ConfigError(f"{where}: critic_net_arch is for algo 'sac' or 'td3' (separate critics), not {config.algo!r}")
+        if not critic or not all(isinstance(n, int) and not isinstance(n, bool) and n > 0 for n in critic):
+            raise ConfigError(f"{where}: critic_net_arch must be positive layer sizes, e.g. (256, 256); got {critic!r}")
     interval = getattr(config, "decision_interval_steps", 1)
     if not isinstance(interval, int) or isinstance(interval, bool) or interval < 1:
         raise ConfigError(f"{where}: decision_interval_steps must be an integer >= 1 (control steps); got {interval!r}")
@@ -102,6 +110,9 @@ def policy_kwargs(config) -> dict:
 
     activation = {"relu": nn.ReLU, "tanh": nn.Tanh}[config.activation]
     out = {"net_arch": list(config.net_arch), "activation_fn": activation}
+    critic = getattr(config, "critic_net_arch", None)
+    if critic is not None:  # SB3's off-policy form: the actor ("pi") and the critics ("qf") apart
+        out["net_arch"] = {"pi": list(config.net_arch), "qf": list(critic)}
     if getattr(config, "log_std_init", None) is not None:
         out["log_std_init"] = float(config.log_std_init)
     return out
