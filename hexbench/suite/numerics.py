@@ -10,8 +10,9 @@ records' golden episodes, `tests/test_golden.py`, reproduce on an AVX-512 Intel 
 and not without). The cost is a slower kernel for the few small products an action needs.
 
 oneMKL reads `MKL_ENABLE_INSTRUCTIONS` at its first call, so it must be in the environment before
-the process multiplies anything: in the sandbox's environment, and set by evaluation workers
-before they import torch. It is not set for training (large batched products would slow down).
+the process multiplies anything: in the sandbox's environment, set by evaluation workers before
+they import torch, and by held-out checkpoint selection before it plays. It is not set for
+training (large batched products would slow down).
 """
 
 from __future__ import annotations

@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from hexbench.errors import HexbenchError
+from hexbench.suite.numerics import use_controller_math
 from hexbench.training.runs import read_run
 from hexbench.training.settings import TrainError, load_baseline_config
 
@@ -204,10 +205,13 @@ def _play(jobs: list[tuple], title: str, workers: int, progress: bool, path: Pat
     scores = table["checkpoints"]
     with Progress(disable=not progress, transient=True) as bar:
         task = bar.add_task(title, total=len(jobs))
+        # the arithmetic of `hexbench run`'s controller processes, so a checkpoint's held-out score is
+        # the same on every x86-64 CPU (in this process it holds where nothing has multiplied yet)
         if workers == 1:
+            use_controller_math()
             outcomes, pool = map(score_job, jobs), None
         else:
-            pool = get_context("spawn").Pool(workers)
+            pool = get_context("spawn").Pool(workers, initializer=use_controller_math)
             outcomes = pool.imap_unordered(score_job, jobs)
         try:
             last_save = time.monotonic()
