@@ -84,7 +84,7 @@ def main() -> None:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(text + "\n")
     if args.figure:
-        plot_confusion(report, args.figure, f"classifier along the mixed course, levels {args.levels}, "
+        plot_confusion(report, args.figure, f"classifier along the mixed course\nlevels {args.levels}, "
                                             f"{args.episodes} protocol seeds each")
 
 
