@@ -31,7 +31,8 @@ REPO = Path(__file__).resolve().parent.parent
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--checkpoint", type=Path, default=REPO / "baselines" / "checkpoints" / "terrain_classifier.pt")
+    parser.add_argument("--checkpoint", type=Path, default=REPO / "baselines" / "checkpoints" / "terrain_classifier_images_v2.pt",
+                        help="classifier weights (default: the HLTA's)")
     parser.add_argument("--levels", default="1,2,3")
     parser.add_argument("--episodes", type=int, default=20, help="episodes per level (protocol seeds 0..N-1)")
     parser.add_argument("--every", type=int, default=30, help="control steps between images (the evaluator: 30)")
