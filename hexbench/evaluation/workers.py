@@ -28,7 +28,7 @@ def worker_init(parent_pid: int, next_core=None) -> None:
 
     threading.Thread(target=exit_when_orphaned, args=(parent_pid,), daemon=True, name="orphan-watchdog").start()
     util.Finalize(None, sandbox.close_all, exitpriority=10)
-    use_controller_math()  # an in-process controller acts here; sandboxed ones inherit the pin
+    use_controller_math()  # for in-process controllers here; sandboxed ones get it in their clean environment
     if next_core is not None:
         with next_core.get_lock():
             slot = next_core.value
