@@ -66,10 +66,11 @@ def main() -> int:
     if unknown:
         print(f"unknown algo(s) {unknown}; valid: {', '.join(CASES)}", file=sys.stderr)
         return 2
+    extra = tuple(parse_override(t) for t in args.set)
     results = []
     for algo in algos:
         for workers in (int(w) for w in args.workers.split(",")):
-            r = measure(algo, workers, args.steps, extra=tuple(parse_override(t) for t in args.set))
+            r = measure(algo, workers, args.steps, extra=extra)
             results.append(r)
             print(f"{algo:4s} workers={workers}  {r['env_steps']:6d} steps in {r['wall_time_s']:7.1f} s  "
                   f"-> {r['env_steps_per_s']:7.1f} env steps/s   (load avg {r['load1_before']:.1f} -> "

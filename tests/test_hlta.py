@@ -86,7 +86,8 @@ def test_the_hlta_classifier_is_the_one_trained_on_walk_views_and_labels_the_cou
     bench/hlta_course_labels.py measured for it; version 1's stays shipped for the dataset's own test."""
     import json
 
-    hlta = _hlta()
-    meta = json.loads((HLTA_PATH.parent / hlta.CONFIG.classifier_checkpoint).with_suffix(".json").read_text())
+    from hexbench.perception.classifier import sidecar_path
+
+    meta = json.loads(sidecar_path(HLTA_PATH.parent / _hlta().CONFIG.classifier_checkpoint).read_text())
     assert meta["dataset"]["train_images"] > 3000  # version 1 has 480 training images
     assert meta["evaluations"]["mixed_course"]["accuracy"] >= 0.95

@@ -109,7 +109,7 @@ def test_a_critic_network_is_refused_where_there_is_no_separate_critic():
 
     ppo = load_controller_module(REPO / "baselines" / "ppo_cpg.py").CONFIG
     with pytest.raises(ConfigError, match="critic_net_arch is for algo 'sac' or 'td3'"):
-        validate_config(replace(ppo, critic_net_arch=(64,)) if hasattr(ppo, "critic_net_arch") else _with_critic(ppo))
+        validate_config(_with_critic(ppo))
     sac = load_controller_module(REPO / "baselines" / "sac_cpg.py").CONFIG
     with pytest.raises(ConfigError, match="positive layer sizes"):
         validate_config(replace(sac, critic_net_arch=(256, 0)))
