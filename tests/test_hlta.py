@@ -91,3 +91,35 @@ def test_the_hlta_classifier_is_the_one_trained_on_walk_views_and_labels_the_cou
     meta = json.loads(sidecar_path(HLTA_PATH.parent / _hlta().CONFIG.classifier_checkpoint).read_text())
     assert meta["dataset"]["train_images"] > 3000  # version 1 has 480 training images
     assert meta["evaluations"]["mixed_course"]["accuracy"] >= 0.95
+
+
+def test_shipped_config_walks_rough_and_slopes_with_the_held_cpg_and_climbs_stairs_with_the_policy():
+    """Config.low_level: rough and slopes labels send a_r = the heading hold alone (the open-loop CPG
+    steered); a stairs label sends the stairs policy's residual without the hold."""
+    from dataclasses import replace
+
+    from hexbench.agents.heading import BASE_Y_INDEX, HeadingSteering
+    from hexbench.suite.tasks import load_suite
+
+    hlta = _hlta()
+    task = load_suite("v1").task("mixed", 1)
+    config = hlta.CONFIG
+    assert dict(config.low_level) == {"rough": "cpg", "slopes": "cpg", "stairs": "policy"}
+    feed = iter(["rough", "stairs", "stairs", "stairs"])
+    policies = {t: hlta.ZeroResidual() if kind == "cpg" else ConstantPolicy(0.5) for t, kind in config.low_level}
+    ctrl = hlta.HLTAController(policies, lambda image: next(feed), 0.6, config,
+                               HeadingSteering.for_task(config.heading_hold, task))
+    twin = HeadingSteering.for_task(config.heading_hold, task)
+    ctrl.reset(0)
+    obs = np.zeros(62, np.float32)
+    obs[BASE_Y_INDEX] = -0.3  # right of the centre line: the hold turns left
+    ctrl.see(None)
+    for _ in range(20):
+        np.testing.assert_allclose(ctrl.act(obs), twin.residual(obs).astype(np.float32))
+    assert np.abs(ctrl.act(obs)).max() > 0  # the hold steers
+    for _ in range(3):
+        ctrl.see(None)
+    assert ctrl.terrain == "stairs"
+    np.testing.assert_allclose(ctrl.act(obs), 0.5 * 0.3 / 0.6)  # the policy alone, rescaled to its eps
+    with pytest.raises(ValueError, match="Config.low_level"):
+        hlta.make_controller(task, replace(config, low_level=(("rough", "cpg"), ("slopes", "learned"), ("stairs", "policy"))))

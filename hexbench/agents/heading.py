@@ -1,0 +1,81 @@
+"""Heading hold for controllers that act through the CPG (action mode `cpg_residual`).
+
+The open-loop tripod gait drifts: on the mixed course (6.3 m) most of the CPG's failures, and of a
+hierarchy built on it, are lateral deviations (|y| > 0.8 m). `HeadingHold` steers back to the
+course's centre line the way a hexapod turns: the stride of one side grows and of the other shrinks.
+The CPG's hip angle is A1 y_i (hexbench.world.cpg, eq. 4); adding side_i u A1 y_i to it makes the
+right legs' stride (1 + u) and the left legs' (1 - u) times the CPG's, so u > 0 turns left (yaw
+grows). u is a proportional law on the heading error towards a point `lookahead_m` ahead on the
+centre line (the line through the start and the target), limited to `max_turn`:
+
+    u = clip(gain * wrap(atan2(target_y - y, lookahead_m) - yaw), -max_turn, max_turn)
+
+It needs the CPG's output a_c at every step, which the observation does not carry: the steering
+runs its own copy of the environment's CPG (same parameters, same integration, reset with the
+episode), so its a_c is the environment's exactly. Only the hips are touched; knees and ankles
+(the lift) stay as the CPG and the policy make them. Units: the returned residual is in action
+units (divided by the environment's eps), ready to add to a policy's a_r.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from hexbench.world.cpg import NUM_LEGS, CPGParams, HopfCPG
+
+# legs in the CPG's order RF, RM, RB, LB, LM, LF: +1 right, -1 left
+LEG_SIDE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])
+JOINTS_PER_LEG = 3
+# observation layout (hexbench/world/env.py): base xyz at 54-56, base roll pitch yaw at 57-59, target xy at 60-61
+BASE_Y_INDEX, BASE_YAW_INDEX, TARGET_Y_INDEX = 55, 59, 61
+
+
+@dataclass(frozen=True)
+class HeadingHold:
+    gain: float = 1.0  # turn command u per radian of heading error
+    max_turn: float = 0.3  # |u| limit: a side's stride changes by at most this fraction of the CPG's
+    lookahead_m: float = 1.0  # aim at the centre line this far ahead [m]
+
+    def __post_init__(self) -> None:
+        if not (self.gain >= 0 and 0 <= self.max_turn < 1 and self.lookahead_m > 0):
+            raise ValueError(f"HeadingHold needs gain >= 0, 0 <= max_turn < 1 and lookahead_m > 0; got {self}")
+
+    def turn(self, obs: np.ndarray) -> float:
+        """The turn command u for one observation (u > 0: turn left)."""
+        y, yaw, target_y = float(obs[BASE_Y_INDEX]), float(obs[BASE_YAW_INDEX]), float(obs[TARGET_Y_INDEX])
+        heading_error_rad = (math.atan2(target_y - y, self.lookahead_m) - yaw + math.pi) % (2 * math.pi) - math.pi
+        return max(-self.max_turn, min(self.max_turn, self.gain * heading_error_rad))
+
+
+class HeadingSteering:
+    """The heading hold of one episode: `residual(obs)` once per control step, `reset()` per episode."""
+
+    def __init__(self, hold: HeadingHold, cpg_params: CPGParams, control_dt_s: float, eps: float):
+        if eps <= 0:
+            raise ValueError(f"the environment's residual scale eps must be positive, got {eps}")
+        self.hold, self.eps = hold, float(eps)
+        self.cpg = HopfCPG(cpg_params, control_dt_s)
+        self.hip_gain = np.zeros(NUM_LEGS * JOINTS_PER_LEG)
+        self.reset()
+
+    @classmethod
+    def for_task(cls, hold: HeadingHold, task) -> HeadingSteering:
+        """Steering matched to `task`'s environment in action mode cpg_residual (its CPG, control rate and eps)."""
+        cfg = task.env_config("cpg_residual")
+        return cls(hold, cfg.cpg, cfg.physics.control_dt_s, cfg.eps)
+
+    def reset(self) -> None:
+        self.cpg.reset()
+        self.last_turn = 0.0
+
+    def residual(self, obs: np.ndarray) -> np.ndarray:
+        """The hip residual for this step [action units], advancing the CPG copy by one step; call
+        exactly once per control step, as the environment steps its CPG once per action."""
+        a_c = self.cpg.step()
+        self.last_turn = u = self.hold.turn(obs)
+        out = np.zeros(NUM_LEGS * JOINTS_PER_LEG)
+        out[0::JOINTS_PER_LEG] = LEG_SIDE * (u / self.eps) * a_c[0::JOINTS_PER_LEG]
+        return out
