@@ -2,6 +2,7 @@
 
     python bench/sandbox_overhead.py                       # PPO-CPG, 6 levels x 4 episodes, 2 workers, 3 rounds
     python bench/sandbox_overhead.py --controller baselines/cpg.py --episodes 2 --rounds 1
+    python bench/sandbox_overhead.py --per-step                 # one pinned worker: act() apart from the rest
 
 The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
 else process) and in-process (`--isolation none`), alternating A/B/B/A in one run, after an untimed
@@ -82,13 +83,63 @@ def round_trip_us(isolation: str, pinned: bool, calls: int = 3000) -> float:
     return statistics.median(times) * 1e6
 
 
+class _TimedActor:
+    """Wraps an episode's controller and sums the wall time of its act() calls [s]."""
+
+    def __init__(self, ctrl):
+        self.ctrl, self.act_s = ctrl, 0.0
+        self.action_mode, self.camera = ctrl.action_mode, getattr(ctrl, "camera", None)
+
+    def reset(self, seed: int) -> None:
+        self.ctrl.reset(seed)
+
+    def act(self, obs, step: int):
+        t0 = time.perf_counter()
+        action = self.ctrl.act(obs, step)
+        self.act_s += time.perf_counter() - t0
+        return action
+
+
+def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000, 1001)) -> list[dict]:
+    """One worker pinned to one core, episodes of rough 3 cm: per control step, the act() round trip
+    and the rest of the step (physics, checks) [us], after one untimed episode."""
+    from hexbench.suite.rollout import play
+
+    task = load_suite("v1").task("rough", 3.0)
+    previous = pin_to_core()
+    try:
+        ctrl = sandbox.controller_for(controller, task, isolation)
+        play(task, seeds[0], _TimedActor(ctrl), controller_seed=5)
+        out = []
+        for seed in seeds:
+            actor = _TimedActor(ctrl)
+            t0 = time.perf_counter()
+            steps = play(task, seed, actor, controller_seed=5).row["steps"]
+            total = time.perf_counter() - t0
+            out.append({"seed": seed, "steps": steps, "step_us": total / steps * 1e6, "act_us": actor.act_s / steps * 1e6,
+                        "rest_us": (total - actor.act_s) / steps * 1e6})
+        sandbox.close_all()
+    finally:
+        if previous is not None:
+            os.sched_setaffinity(0, previous)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--controller", default=str(REPO / "baselines" / "ppo_cpg.py"))
     ap.add_argument("--episodes", type=int, default=4, help="episodes per level")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rounds", type=int, default=3, help="A/B pairs")
+    ap.add_argument("--per-step", action="store_true", help="only the per-step split of one pinned worker, A/B/A/B")
     args = ap.parse_args()
+    if args.per_step:
+        mode = sandbox.resolve_isolation("auto")
+        for isolation in (mode, "none", mode, "none"):
+            for r in per_step_us(args.controller, isolation):
+                print(f"{isolation:<10} seed {r['seed']}: {r['steps']} steps, {r['step_us']:.0f} us per step: "
+                      f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us", flush=True)
+        return
     suite = load_suite("v1")
     tasks = [suite.task(t, lv) for t, lv in LEVELS]
     mode = sandbox.resolve_isolation("auto")
