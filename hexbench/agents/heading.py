@@ -25,12 +25,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from hexbench.world.cpg import NUM_LEGS, CPGParams, HopfCPG
+from hexbench.world.env import BASE_Y_INDEX, BASE_YAW_INDEX, TARGET_Y_INDEX
 
 # legs in the CPG's order RF, RM, RB, LB, LM, LF: +1 right, -1 left
 LEG_SIDE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])
 JOINTS_PER_LEG = 3
-# observation layout (hexbench/world/env.py): base xyz at 54-56, base roll pitch yaw at 57-59, target xy at 60-61
-BASE_Y_INDEX, BASE_YAW_INDEX, TARGET_Y_INDEX = 55, 59, 61
 
 
 @dataclass(frozen=True)
@@ -58,7 +57,6 @@ class HeadingSteering:
             raise ValueError(f"the environment's residual scale eps must be positive, got {eps}")
         self.hold, self.eps = hold, float(eps)
         self.cpg = HopfCPG(cpg_params, control_dt_s)
-        self.hip_gain = np.zeros(NUM_LEGS * JOINTS_PER_LEG)
         self.reset()
 
     @classmethod
@@ -69,13 +67,12 @@ class HeadingSteering:
 
     def reset(self) -> None:
         self.cpg.reset()
-        self.last_turn = 0.0
 
     def residual(self, obs: np.ndarray) -> np.ndarray:
         """The hip residual for this step [action units], advancing the CPG copy by one step; call
         exactly once per control step, as the environment steps its CPG once per action."""
         a_c = self.cpg.step()
-        self.last_turn = u = self.hold.turn(obs)
+        u = self.hold.turn(obs)
         out = np.zeros(NUM_LEGS * JOINTS_PER_LEG)
         out[0::JOINTS_PER_LEG] = LEG_SIDE * (u / self.eps) * a_c[0::JOINTS_PER_LEG]
         return out

@@ -39,7 +39,7 @@ import numpy as np
 from hexbench.artifacts.files import atomic_path, sha256_file
 from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
 from hexbench.errors import HexbenchError
-from hexbench.world.env import ACTION_MODES, OBS_DIM
+from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, TARGET_X_INDEX
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
@@ -358,7 +358,6 @@ POLICY_TERRAIN: dict[str, str] = {"mixed": "rough"}
 # Policies train with the goal 2.5 m ahead (paper 4.1); on a longer course (the mixed course, 6.3 m)
 # they see a waypoint at most this far ahead of the base instead of a goal they never met in training.
 TRAINING_GOAL_DISTANCE_M = 2.5
-BASE_X_INDEX, TARGET_X_INDEX = 54, 60  # observation layout, hexbench/world/env.py
 
 
 def waypoint_horizon_m(goal_distance_m: float) -> float | None:

@@ -54,6 +54,8 @@ def cpg_params_action(omega_swing: float, a1: float, a2: float, a3: float) -> tu
 
 
 OBS_DIM = 62
+# Where controllers read the base pose and the target in an observation (the layout above)
+BASE_X_INDEX, BASE_Y_INDEX, BASE_YAW_INDEX, TARGET_X_INDEX, TARGET_Y_INDEX = 54, 55, 59, 60, 61
 # Observation bounds (generous physical limits; observations are clipped to them).
 OBS_HIGH = np.concatenate([
     np.full(18, 2 * math.pi), np.full(18, 100.0), np.full(18, 20.0), np.full(3, 100.0), np.full(3, 4.0),
