@@ -312,7 +312,7 @@ def tiny_v2_build(tmp_path_factory) -> Path:
 
 def test_version_2_adds_walk_views_labelled_and_counted(tiny_v2_build, tiny_build):
     manifest = json.loads((tiny_v2_build / "manifest.json").read_text())
-    assert manifest["version"] == "2.0.0" and verify_build(tiny_v2_build) == []
+    assert manifest["version"] == "2.1.0" and verify_build(tiny_v2_build) == []
     walk_rows = [f for f in manifest["files"] if f["view_kind"] == "walk"]
     approach = [f for f in manifest["files"] if f["view_kind"] == "approach"]
     # the approach views are version 1's images, byte for byte
@@ -332,6 +332,45 @@ def test_version_2_adds_walk_views_labelled_and_counted(tiny_v2_build, tiny_buil
         for label, n in per_label.items():
             assert sum(kinds[label] for kinds in by_kind[split].values()) == n
     assert sum(by_kind["test"]["walk-mixed"].values()) > 0 or sum(by_kind["train"]["walk-mixed"].values()) > 0
+
+
+def _stalling_stairs_walk(**rules) -> list:
+    """Walk 1 of a two-walk stairs plan with its level raised to 10 cm, a riser the open-loop CPG
+    cannot climb: it stalls in front of the first step."""
+    from dataclasses import replace
+
+    from hexbench.perception.dataset.walks import walk_images
+
+    config = WalkConfig(walks_per_terrain=2, mixed_walks=0, image_every_steps=60, max_steps_single=1500, **rules)
+    walk = replace([w for w in plan_walks(0, config) if w.kind == "stairs"][1], level=10.0)
+    return list(walk_images(walk, config))
+
+
+def test_a_stalled_walk_gives_no_near_identical_frames():
+    every_frame = _stalling_stairs_walk(min_image_spacing_m=0.0, min_image_turn_deg=0.0)
+    kept = _stalling_stairs_walk()
+    assert max(i.base_x_m for i in every_frame) < 0.2  # it did stall in front of the first riser (x = 0.3 m)
+    assert 0 < len(kept) <= len(every_frame) // 3
+    for i, a in enumerate(kept):
+        for b in kept[i + 1:]:
+            turn = abs((b.heading_deg - a.heading_deg + 180) % 360 - 180)
+            assert np.hypot(b.base_x_m - a.base_x_m, b.base_y_m - a.base_y_m) >= 0.03 or turn >= 5.0
+
+
+def test_a_walk_stops_photographing_once_its_look_ahead_is_past_the_last_obstacle():
+    from dataclasses import replace
+
+    from hexbench.perception.dataset.walks import walk_images
+    from hexbench.world.terrain import make_terrain
+
+    config = WalkConfig(walks_per_terrain=1, mixed_walks=0, image_every_steps=60, max_steps_single=4000)
+    walk = replace(next(w for w in plan_walks(0, config) if w.kind == "stairs"), level=2.0)
+    end_x_m = make_terrain("stairs", 2.0).obstacle_end_x_m
+    kept = list(walk_images(walk, config))
+    every = list(walk_images(walk, replace(config, stop_past_obstacle=False)))
+    assert max(i.base_x_m for i in every) + config.lookahead_m > end_x_m  # the walk itself went past it
+    assert kept and all(i.base_x_m + config.lookahead_m <= end_x_m for i in kept)
+    assert [i.step for i in kept] == [i.step for i in every][: len(kept)]
 
 
 def test_version_2_is_reproducible(tiny_v2_build, tmp_path):
@@ -368,7 +407,7 @@ def test_unknown_version_is_refused_with_the_valid_ones(tmp_path):
 def test_registry_keeps_every_major_version_downloadable(tiny_build, tiny_v2_build, server, tmp_path):
     www, url = server
     entries = {}
-    for build, version in ((tiny_build, "1.0.0"), (tiny_v2_build, "2.0.0")):
+    for build, version in ((tiny_build, "1.0.0"), (tiny_v2_build, "2.1.0")):
         archive = pack_build(build, tmp_path / "dist" / f"terrain-images-{version}.tar.gz", f"terrain-images-{version}")
         (www / archive.name).write_bytes(archive.read_bytes())
         entry = registry_entry_for(archive, "terrain-images", version, (f"{url}/{archive.name}",))
@@ -377,7 +416,7 @@ def test_registry_keeps_every_major_version_downloadable(tiny_build, tiny_v2_bui
     registry = tmp_path / "registry.toml"
     write_registry(entries, registry)
     cache = tmp_path / "cache"
-    assert download("terrain-images", registry_path=registry, cache_dir=cache) == cache / "terrain-images-2.0.0"
+    assert download("terrain-images", registry_path=registry, cache_dir=cache) == cache / "terrain-images-2.1.0"
     assert download("terrain-images", version=1, registry_path=registry, cache_dir=cache) == cache / "terrain-images-1.0.0"
     with pytest.raises(DownloadError, match="no registered version 3; registered versions: 1, 2"):
         download("terrain-images", version=3, registry_path=registry, cache_dir=cache)

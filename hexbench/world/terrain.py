@@ -168,6 +168,11 @@ class RoughTerrain:
     def level(self) -> float:
         return self.height_difference_cm
 
+    @property
+    def obstacle_end_x_m(self) -> float:
+        """Where the obstacle ends: flat ground beyond it [m]."""
+        return self.end_x_m
+
     def heights(self, rng: np.random.Generator) -> np.ndarray:
         """The heightfield [m], rows along y and columns along x, on the course grid."""
         res = self.resolution_m
@@ -245,6 +250,11 @@ class SlopesTerrain:
         return x0, x1, x2, x2 + self.ramp_run_m
 
     @property
+    def obstacle_end_x_m(self) -> float:
+        """Foot of the descent: flat ground beyond it [m]."""
+        return self.breakpoints_m[-1]
+
+    @property
     def top_height_m(self) -> float:
         return self.ramp_run_m * math.tan(math.radians(self.angle_deg))
 
@@ -310,6 +320,11 @@ class StairsTerrain:
     def riser_x_m(self, k: int) -> float:
         return self.start_x_m + k * self.step_depth_m
 
+    @property
+    def obstacle_end_x_m(self) -> float:
+        """One step depth past the last riser: the top landing beyond it [m]."""
+        return self.riser_x_m(self.num_steps - 1) + self.step_depth_m
+
     def profile_height(self, x_m: float) -> float:
         h = self.step_height_cm / 100.0
         steps_up = sum(1 for k in range(self.num_steps) if x_m >= self.riser_x_m(k))
@@ -351,6 +366,11 @@ class MixedCourse:
         return (RoughTerrain(rough_cm, end_x_m=MIXED_ROUGH_END_X_M),
                 SlopesTerrain(slope_deg, start_x_m=MIXED_SLOPE_START_X_M),
                 StairsTerrain(stairs_cm, start_x_m=MIXED_STAIRS_START_X_M, end_x_m=MIXED_END_X_M))
+
+    @property
+    def obstacle_end_x_m(self) -> float:
+        """The end of its last obstacle, the stairs [m]."""
+        return self.parts[-1].obstacle_end_x_m
 
     def build(self, client: int, rng: np.random.Generator) -> BuiltTerrain:
         rough, slope, stairs = self.parts

@@ -15,6 +15,16 @@ Label rule, written into every manifest row as `label_rule`:
     ahead of the base along x (`hexbench.world.terrain.mixed_segment_at`), the rule
     `bench/hlta_course_labels.py` scores the classifier by.
 
+Which frames become images (version 2.1.0; 2.0.0 kept every frame):
+  * none once the look-ahead point has passed the end of the walk's last obstacle
+    (`obstacle_end_x_m` of the terrain: the foot of the descent, one step past the last riser,
+    the end of the rough ground): the camera then shows the flat ground beyond, which is no
+    terrain class, and 2.0.0's classifier took such frames for a slope;
+  * none whose pose is within `min_image_spacing_m` and `min_image_turn_deg` of an image the walk
+    already took: a robot stalled in front of a riser it cannot climb gave some twenty
+    near-identical frames of one riser face (its heading rocking +-11 deg with the gait, so that
+    every second frame repeats), one view weighted twenty times.
+
 Every walk is a pure function of (dataset seed, kind, walk index): its level, episode seed,
 ground colour and image phase come from `np.random.default_rng([seed, WALK_STREAM, kind, index])`.
 The episode seed rebuilds the terrain (the rough heightfield) and the start pose; the physics is
@@ -23,6 +33,7 @@ deterministic, so the same seed renders the same images.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
@@ -53,6 +64,9 @@ class WalkConfig:
     max_steps_single: int = 4000  # episode rules as protocol v1: 66.7 s, 2.5 m goal ...
     max_steps_mixed: int = 8000  # ... and 8000 steps, 6.3 m goal on the mixed course
     stall_window_s: float = 20.0  # a walk that advances less than 5 cm in 20 s ends (protocol v1)
+    stop_past_obstacle: bool = True  # no images once base x + lookahead_m is past the last obstacle (2.1.0)
+    min_image_spacing_m: float = 0.03  # a frame within this distance [m] ...
+    min_image_turn_deg: float = 5.0  # ... and heading [deg] of an earlier image is skipped (2.1.0; 0, 0: none)
     test_fraction: float = 0.2
 
     def __post_init__(self) -> None:
@@ -60,6 +74,8 @@ class WalkConfig:
             raise ValueError("walk counts must be >= 0")
         if self.image_every_steps < 1:
             raise ValueError(f"image_every_steps must be >= 1, got {self.image_every_steps}")
+        if self.min_image_spacing_m < 0 or self.min_image_turn_deg < 0:
+            raise ValueError("min_image_spacing_m and min_image_turn_deg must be >= 0")
 
     def count(self, kind: str) -> int:
         return self.mixed_walks if kind == "mixed" else self.walks_per_terrain
@@ -155,23 +171,35 @@ def cpg_camera_shots(env, every_steps: int, phase_steps: int = 0, camera=TERRAIN
 
 
 def walk_images(walk: Walk, config: WalkConfig) -> Iterator[WalkImage]:
-    """Run the walk and yield its images in step order."""
-    import math
+    """Run the walk and yield its images in step order (the frames the rules above keep)."""
 
     from hexbench.world.env import HexapodEnv
-    from hexbench.world.terrain import mixed_segment_at
+    from hexbench.world.terrain import make_terrain, mixed_segment_at
 
     env = HexapodEnv(walk_env_config(walk, config))
+    obstacle_end_x_m = make_terrain(walk.kind, walk.level).obstacle_end_x_m
+    taken: list[tuple[float, float, float]] = []  # (x [m], y [m], heading [deg]) of every image so far
     try:
         env.reset(seed=walk.episode_seed)
         paint_terrain(env.sim, walk.ground_rgb)
         for step, state, image in cpg_camera_shots(env, config.image_every_steps, walk.image_phase_steps):
             x, y = float(state.base_pos_m[0]), float(state.base_pos_m[1])
-            yaw = float(state.values[63])
+            heading_deg = math.degrees(float(state.values[63]))
+            if config.stop_past_obstacle and x + config.lookahead_m > obstacle_end_x_m:
+                return
+            if any(_near_identical(pose, (x, y, heading_deg), config) for pose in taken):
+                continue
+            taken.append((x, y, heading_deg))
             label = mixed_segment_at(x + config.lookahead_m) if walk.kind == "mixed" else walk.kind
-            yield WalkImage(walk, step, x, y, math.degrees(yaw), label, image)
+            yield WalkImage(walk, step, x, y, heading_deg, label, image)
     finally:
         env.close()
+
+
+def _near_identical(a: tuple[float, float, float], b: tuple[float, float, float], config: WalkConfig) -> bool:
+    turn_deg = abs((b[2] - a[2] + 180.0) % 360.0 - 180.0)
+    return (math.hypot(b[0] - a[0], b[1] - a[1]) < config.min_image_spacing_m
+            and turn_deg < config.min_image_turn_deg)
 
 
 def render_walks(walks: list[Walk], config: WalkConfig,
