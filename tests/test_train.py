@@ -78,6 +78,25 @@ def test_ppo_cpg_smoke_run_writes_checkpoint_csv_and_resumes(tmp_path):
     assert [c["env_steps"] for c in run["checkpoints"]] == [64, 128]
 
 
+def test_env_step_checkpoints_fall_at_the_same_steps_with_the_same_weights_on_a_rerun(tmp_path):
+    import torch
+
+    from hexbench.agents.policy import algo_class
+
+    runs = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        result = train_tiny("ppo_cpg", out, steps=256, extra=("--seed", "7", "--checkpoint-every-steps", "128"))
+        assert result.exit_code == 0, result.output
+        runs.append((out, json.loads((out / "run.json").read_text())))
+    (out_a, run_a), (out_b, run_b) = runs
+    assert [c["env_steps"] for c in run_a["checkpoints"]] == [128, 256] == [c["env_steps"] for c in run_b["checkpoints"]]
+    for ca, cb in zip(run_a["checkpoints"], run_b["checkpoints"]):
+        wa = algo_class("ppo").load(out_a / ca["file"], device="cpu").policy.state_dict()
+        wb = algo_class("ppo").load(out_b / cb["file"], device="cpu").policy.state_dict()
+        assert wa.keys() == wb.keys() and all(torch.equal(wa[k], wb[k]) for k in wa)
+
+
 def test_reward_normaliser_statistics_are_checkpointed_and_restored(tmp_path):
     from hexbench.training.envs import make_vec_env, restore_reward_normalizer
 

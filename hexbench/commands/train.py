@@ -28,6 +28,8 @@ def register(app: typer.Typer) -> None:
         workers: int = typer.Option(1, "--workers", help="parallel environments (processes when > 1)"),
         out: Path = typer.Option(None, "--out", help="run directory [default: training/<method>-<terrain>-seed<S>]"),
         checkpoint_every_s: float = typer.Option(300.0, "--checkpoint-every", help="seconds between checkpoints"),
+        checkpoint_every_steps: int = typer.Option(None, "--checkpoint-every-steps", min=1, help="env steps between "
+                                                   "checkpoints, instead of seconds: the same checkpoints on any machine"),
         csv_every_s: float = typer.Option(60.0, "--csv-every", help="seconds between progress.csv rows"),
         override: list[str] = typer.Option([], "--set", help="override a CONFIG field, NAME=VALUE (repeatable)"),
         progress: bool = typer.Option(True, "--progress/--no-progress", help="show the progress bar"),
@@ -48,7 +50,7 @@ def register(app: typer.Typer) -> None:
         if seeds is not None:
             _train_batch(file, terrain, seeds, out, engine, address, parallel, dict(
                 total_steps=steps, workers=workers, checkpoint_every_s=checkpoint_every_s, csv_every_s=csv_every_s,
-                overrides=override, device=device, init_from=init_from, fixed_level=level, curriculum=curriculum,
+                checkpoint_every_steps=checkpoint_every_steps, overrides=override, device=device, init_from=init_from, fixed_level=level, curriculum=curriculum,
                 value_warmup_steps=value_warmup), progress)
             return
         if "," in terrain or engine != "local" or address or parallel is not None:
@@ -59,7 +61,7 @@ def register(app: typer.Typer) -> None:
             settings = TrainSettings(
                 baseline_path=file, terrain=terrain, total_steps=steps, seed=seed, workers=workers, out_dir=out,
                 checkpoint_every_s=checkpoint_every_s, csv_every_s=csv_every_s,
-                overrides=tuple(parse_override(o) for o in override),
+                checkpoint_every_steps=checkpoint_every_steps, overrides=tuple(parse_override(o) for o in override),
                 command="hexbench " + shlex.join(sys.argv[1:]), show_progress=progress, device=device,
                 init_from=init_from, fixed_level=level,
                 curriculum=parse_curriculum(curriculum) if curriculum is not None else None,

@@ -1,6 +1,8 @@
 """What a run reports while it trains (the SB3 callback `TrainingMonitor`): per-env episode returns
 and successes over the last METRICS_WINDOW_EPISODES episodes, the progress bar, a progress.csv row
-per env every `csv_every_s` and a checkpoint every `checkpoint_every_s` [s of wall time].
+per env every `csv_every_s` and a checkpoint every `checkpoint_every_s` [s of wall time], or every
+`checkpoint_every_steps` [env steps] where that is set: wall-time checkpoints fall at other env steps on
+a faster or busier machine, so a re-run selects among other candidates; env-step checkpoints do not.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ class TrainingMonitor(BaseCallback):
         self.t0 = time.monotonic()
         self.last_csv = self.t0
         self.last_ckpt = self.t0
+        self.next_ckpt_steps = None  # with checkpoint_every_steps: the env-step count of the next checkpoint
         self.start_steps = None
         self.last_csv_steps = None  # env steps of the last progress.csv rows
         self.reward_sum = 0.0  # summed step rewards of this invocation, all envs
@@ -46,6 +49,17 @@ class TrainingMonitor(BaseCallback):
         self.start_steps = self.num_timesteps
         self.t0 = time.monotonic()
         self.last_csv = self.last_ckpt = self.t0
+        self._schedule_step_checkpoint()
+
+    def _schedule_step_checkpoint(self) -> None:
+        every = self.settings.checkpoint_every_steps
+        if every:
+            self.next_ckpt_steps = (self.num_timesteps // every + 1) * every
+
+    def _checkpoint_due(self, now: float) -> bool:
+        if self.settings.checkpoint_every_steps:
+            return self.num_timesteps >= self.next_ckpt_steps
+        return now - self.last_ckpt >= self.settings.checkpoint_every_s
 
     def _on_step(self) -> bool:
         # SB3 counts one step per decision; with actions held (DecisionInterval) a decision spends
@@ -68,7 +82,7 @@ class TrainingMonitor(BaseCallback):
         now = time.monotonic()
         if self.progress is not None and self.n_calls % 20 == 0:
             self._update_progress(now)
-        if now - self.last_ckpt >= self.settings.checkpoint_every_s:
+        if self._checkpoint_due(now):
             self.checkpoint()
         elif now - self.last_csv >= self.settings.csv_every_s:
             self.write_csv()
@@ -131,4 +145,5 @@ class TrainingMonitor(BaseCallback):
         self.write_csv(curriculum)
         self.save_checkpoint(self.model, self.num_timesteps, self.wall_time_s(), curriculum, self.summary(curriculum))
         self.last_ckpt = time.monotonic()
+        self._schedule_step_checkpoint()
 

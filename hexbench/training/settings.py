@@ -36,7 +36,8 @@ class TrainSettings:
     seed: int = 0
     workers: int = 1
     out_dir: Path | None = None  # None -> training/<method>-<terrain>-seed<seed>
-    checkpoint_every_s: float = 300.0
+    checkpoint_every_s: float = 300.0  # [s of wall time]; ignored when checkpoint_every_steps is set
+    checkpoint_every_steps: int | None = None  # [env steps]: the same checkpoints on any machine
     csv_every_s: float = 60.0
     overrides: tuple[tuple[str, object], ...] = ()  # config field overrides (name, value)
     command: str = ""
