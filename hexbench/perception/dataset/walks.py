@@ -53,7 +53,7 @@ LABEL_RULE_MIXED = "mixed segment under base x + lookahead"
 class WalkConfig:
     """How many walks of each kind, and how they are run and photographed."""
 
-    walks_per_terrain: int = 20  # per single terrain (rough, slopes, stairs)
+    walks_per_terrain: int = 60  # per single terrain (rough, slopes, stairs); 2.0.0: 20
     mixed_walks: int = 24  # mixed course, spread evenly over its levels 1-3
     image_every_steps: int = 60  # control steps between images [1/60 s] (the evaluator: 30)
     lookahead_m: float = 0.4  # mixed-course label: the segment this far ahead of the base
