@@ -184,3 +184,75 @@ def test_adding_a_run_to_one_method_leaves_the_other_methods_intervals_alone(rep
     after, cpg_runs_after = ppo_interval()
     assert len(cpg_runs_after) == len(cpg_runs_before) + 1
     assert (after.value, after.low, after.high) == (before.value, before.low, before.high)
+
+
+_SEED_CONTROLLER = '''
+"""Open-loop CPG that declares a (dummy) checkpoint, as a trained seed run does."""
+from pathlib import Path
+import numpy as np
+HERE = Path(__file__).resolve().parent
+
+class Gait:
+    action_mode = "cpg_residual"
+    checkpoint_paths = [HERE / "checkpoints" / "gait-stairs.zip"]
+    def reset(self, seed):
+        pass
+    def act(self, obs):
+        return np.zeros(18, np.float32)
+
+def make_controller(task):
+    return Gait()
+'''
+
+
+def _scored_seed_run(root: Path, name: str) -> tuple[Path, Path]:
+    """(run folder, seed-run folder) of `gait` on the tiny protocol's stairs, its checkpoint in a manifest."""
+    from hexbench.artifacts.files import sha256_file
+    from hexbench.evaluation.evaluate import evaluate
+
+    folder = root / "seeds" / "gait-stairs-seed1"
+    (folder / "checkpoints").mkdir(parents=True, exist_ok=True)
+    code = root / name
+    (code / "checkpoints").mkdir(parents=True)
+    (code / "gait.py").write_text(_SEED_CONTROLLER)
+    (code / "checkpoints" / "gait-stairs.zip").write_bytes(b"weights of seed 1")
+    entry = {"file": "gait-stairs.zip", "sha256": sha256_file(code / "checkpoints" / "gait-stairs.zip"),
+             "method": "gait", "terrain": "stairs", "seed": 1, "env_step_budget": 1000, "env_steps": 800}
+    (folder / "checkpoints" / "manifest.json").write_text(json.dumps({"format": 1, "checkpoints": {"gait-stairs": entry}}))
+    tasks = [t for t in load_suite("v1").tasks if t.terrain == "stairs"]
+    res = evaluate(str(code / "gait.py"), tasks, code / "run", workers=1, record=False, progress=False)
+    assert res.error is None
+    return code / "run", folder
+
+
+def _forge(run: Path) -> None:
+    """Flip one episode's success and recompute nothing: the rows no longer match the action logs."""
+    record = json.loads((run / "result.json").read_text())
+    record["episodes"][0]["success"] = not record["episodes"][0]["success"]
+    (run / "result.json").write_text(json.dumps(record))
+
+
+def test_a_seed_run_is_admitted_by_replay_into_its_folder_and_a_forged_one_is_refused(tmp_path, tiny_protocol):
+    from hexbench.leaderboard.admission import add_seed_run
+    from hexbench.leaderboard.records import TIER_REPLAYED, record_tier
+
+    forged, folder = _scored_seed_run(tmp_path, "forged")
+    _forge(forged)
+    with pytest.raises(lb.RecordError):
+        add_seed_run(forged, folder)
+    assert sorted(p.name for p in folder.iterdir()) == ["checkpoints"]
+
+    run, folder = _scored_seed_run(tmp_path, "honest")
+    dest = add_seed_run(run, folder)
+    assert dest == folder / "result-stairs.json"
+    record = json.loads(dest.read_text())
+    assert record_tier(record, str(dest)) == TIER_REPLAYED
+    assert record["admission"]["episodes_replayed"] == record["admission"]["episodes_total"] == len(record["episodes"])
+    (seed_run,) = seed_runs.load_seed_runs(folder.parent).runs
+    assert seed_run.seed == 1 and seed_run.method == "gait"
+
+    before = dest.read_bytes()
+    _forge(run)
+    with pytest.raises(lb.RecordError):
+        add_seed_run(run, folder)
+    assert dest.read_bytes() == before and not list(folder.glob(".*.tmp"))

@@ -54,19 +54,26 @@ def register(app: typer.Typer) -> None:
         engine: str = typer.Option("local", "--engine", help="where replays run: local (processes on this machine) "
                                    "or ray (tasks on a Ray cluster; the action logs travel with them)"),
         address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
+        seed_run: Path = typer.Option(None, "--seed-run", help="admit the run as this seed-run folder's record "
+                                      "(baselines/seeds/<method>-<terrain>-seed<S>/result-<terrain>.json) instead"),
     ) -> None:
         """Validate a run's record, replay its episodes from their action logs, copy it in with its admission, rebuild."""
 
         from hexbench.errors import HexbenchError
         from hexbench.evaluation import engines
         from hexbench.leaderboard import RecordError, add, build
+        from hexbench.leaderboard.admission import add_seed_run
         from hexbench.suite.seeds import read_seed_key
 
         try:
             seed_set = read_seed_key(seed_key) if seed_key else None
             with engines.opened(engine, address) as replay_engine:
-                dest = add(run_dir, directory, replace=replace, protocol=protocol, sample=sample,
-                           workers=workers or replay_engine.default_workers(), seed_set=seed_set, progress=True)
+                replay_workers = workers or replay_engine.default_workers()
+                if seed_run is not None:
+                    dest = add_seed_run(run_dir, seed_run, protocol, sample=sample, workers=replay_workers, progress=True)
+                else:
+                    dest = add(run_dir, directory, replace=replace, protocol=protocol, sample=sample,
+                               workers=replay_workers, seed_set=seed_set, progress=True)
             result = build(directory, protocol)
         except (RecordError, ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)

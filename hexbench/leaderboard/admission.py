@@ -4,7 +4,8 @@ A measured record comes with its run folder; `admit` replays its episodes from t
 (hexbench.replay.verify, all of them or a sample) and adds the admission block that binds the
 record's rows, by their digest, to that replay. `--replace` overwrites a record of the same name,
 never with a less proven one (a lower trust tier, or the same tier with a smaller share replayed).
-Labels are unique across the folder; extra-course records go to `courses/`.
+Labels are unique across the folder; extra-course records go to `courses/`. `add_seed_run` admits a
+seed run's record (baselines/seeds/<method>-<terrain>-seed<S>/result-<terrain>.json) the same way.
 """
 
 from __future__ import annotations
@@ -138,4 +139,28 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
             _refuse_downgrade(dest, record, str(result_path))
     if dest.resolve() != result_path.resolve():
         write_all_atomically({dest: json.dumps(record, indent=1) + "\n"})
+    return dest
+
+
+def add_seed_run(run_dir: str | Path, folder: str | Path, protocol: str = DEFAULT_PROTOCOL, *,
+                 sample: int | None = None, workers: int = 1, progress: bool = False) -> Path:
+    """Replay the run in `run_dir` and write its record, with the admission block, as the seed-run
+    folder's result-<terrain>.json (a record already there must be this run's: the same episodes
+    digest); RecordError if refused, and then nothing is written."""
+    from hexbench.leaderboard.seeds import seed_run_of, seed_run_terrain
+
+    run_dir, folder = Path(run_dir), Path(folder)
+    dest = folder / f"result-{seed_run_terrain(folder)}.json"
+    record_path = run_dir / "result.json"
+    record = read_record(record_path)
+    if record["protocol"] != protocol:
+        raise RecordError(f"{record_path}: record is protocol {record['protocol']}, not {protocol}")
+    if dest.exists() and read_record(dest).get("episodes_digest") != record.get("episodes_digest"):
+        raise RecordError(f"{record_path}: its episodes are not those of {dest} (the episodes digests differ); "
+                          f"admit the run that made that record")
+    seed_run_of(folder, record, str(record_path))  # the folder's method, terrain and checkpoint, before replaying
+    record = admit(record, run_dir, str(record_path), sample=sample, workers=workers, progress=progress)
+    if dest.exists():
+        _refuse_downgrade(dest, record, str(record_path))
+    write_all_atomically({dest: json.dumps(record, indent=1) + "\n"})
     return dest

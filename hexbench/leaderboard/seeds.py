@@ -144,17 +144,31 @@ def _manifest_entry(folder: Path, record: dict, where: str) -> dict:
     return bound[0]
 
 
-def read_seed_run(folder: Path, protocol: str = DEFAULT_PROTOCOL) -> SeedRun | None:
-    """The seed run in `folder`; None if its record is of another protocol; RecordError if refused."""
-    match = _FOLDER.match(folder.name)
+def _folder_match(folder: Path) -> re.Match:
+    match = _FOLDER.match(Path(folder).name)
     if not match:
         raise RecordError(f"{folder}: not a seed-run folder name; expected <method>-<terrain>-seed<S>")
-    terrain = match["terrain"]
-    path = folder / f"result-{terrain}.json"
-    where = str(path)
+    return match
+
+
+def seed_run_terrain(folder: Path) -> str:
+    """The terrain a seed-run folder's name names; RecordError for a name that is not one."""
+    return _folder_match(folder)["terrain"]
+
+
+def read_seed_run(folder: Path, protocol: str = DEFAULT_PROTOCOL) -> SeedRun | None:
+    """The seed run in `folder`; None if its record is of another protocol; RecordError if refused."""
+    path = Path(folder) / f"result-{seed_run_terrain(folder)}.json"
     record = read_record(path)
     if record.get("protocol") != protocol:
         return None
+    return seed_run_of(Path(folder), record, str(path))
+
+
+def seed_run_of(folder: Path, record: dict, where: str) -> SeedRun:
+    """`record` as the seed run of `folder` (its name, terrain, label and manifest entry); RecordError if refused."""
+    match = _folder_match(folder)
+    terrain = match["terrain"]
     row = measured_row(record, where, terrains_covered=True)
     covered = [t["terrain"] for t in row.terrains]
     if covered != [terrain]:
