@@ -13,7 +13,8 @@ mixed-course walk views.
     .venv/bin/python bench/hlta_course_labels.py [--checkpoint PT] [--levels 1,2,3] [--episodes 20] \\
         [--json out.json] [--figure confusion.png]
 
-Prints accuracy, per-segment recall and the confusion counts (rows: truth, columns: label).
+Prints accuracy, per-segment recall, the confusion counts (rows: truth, columns: label) and where the
+wrong frames lie (level, base x); --json also keeps every wrong frame.
 """
 
 from __future__ import annotations
@@ -50,26 +51,36 @@ def main() -> None:
     from hexbench.suite.controller import CAMERA_GROUND_RGB
     from hexbench.suite.tasks import load_suite
     from hexbench.world.env import HexapodEnv
-    from hexbench.world.terrain import mixed_segment_at
+    from hexbench.world.terrain import make_terrain, mixed_segment_at
 
     torch.set_num_threads(1)
     model = load_classifier(args.checkpoint)
     suite = load_suite("v1")
-    truths, labels = [], []
+    truths, labels, errors = [], [], []
+    on_obstacles = []  # per frame: is the look-ahead point still before the course's last obstacle end?
     start = time.perf_counter()
     for level in [float(v) for v in args.levels.split(",")]:
         task = suite.task("mixed", level)
+        obstacle_end_x_m = make_terrain("mixed", level).obstacle_end_x_m
         env = HexapodEnv(task.env_config("cpg_residual"))
         for seed in task.seeds(args.episodes):
             env.reset(seed=seed)
             paint_terrain(env.sim, CAMERA_GROUND_RGB)
-            images = []
-            for _, state, image in cpg_camera_shots(env, args.every):
+            images, where = [], []
+            for step, state, image in cpg_camera_shots(env, args.every):
                 images.append(image)
+                where.append((step, float(state.base_pos_m[0])))
                 truths.append(TERRAIN_CLASSES.index(mixed_segment_at(float(state.base_pos_m[0]) + args.lookahead)))
-            labels.extend(predict(model, np.stack(images)).tolist())
+            predicted = predict(model, np.stack(images)).tolist()
+            labels.extend(predicted)
+            on_obstacles.extend(x + args.lookahead <= obstacle_end_x_m for _, x in where)
+            errors.extend({"level": level, "seed": int(seed), "step": st, "base_x_m": round(x, 3),
+                           "truth": TERRAIN_CLASSES[t], "label": TERRAIN_CLASSES[p]}
+                          for (st, x), t, p in zip(where, truths[-len(images):], predicted) if t != p)
         env.close()
     report = evaluate(np.array(truths), np.array(labels))
+    kept = np.array(on_obstacles)
+    before_end = evaluate(np.array(truths)[kept], np.array(labels)[kept])
     out = {
         "checkpoint": str(args.checkpoint), "checkpoint_sha256": sha256_file(args.checkpoint),
         "levels": args.levels, "episodes_per_level": args.episodes, "every_steps": args.every,
@@ -78,9 +89,16 @@ def main() -> None:
         "support_per_segment": {k: v["support"] for k, v in report["per_class"].items()},
         "confusion_truth_by_label": report["confusion"], "classes": report["classes"],
         "wall_time_s": round(time.perf_counter() - start, 1), "machine": platform.platform(),
+        # the frames terrain-images 2.1.0 would keep: look-ahead not yet past the last obstacle's end
+        "before_last_obstacle_end": {"images": before_end["num_images"], "accuracy": before_end["accuracy"]},
+        "errors": errors,  # every wrong frame: level, episode seed, control step, base x [m], truth, label
     }
     text = json.dumps(out, indent=2)
-    print(text)
+    print(json.dumps({k: v for k, v in out.items() if k != "errors"}, indent=2))
+    print(f"{len(errors)} wrong frames, by level and base x [m]:")
+    for level in sorted({e["level"] for e in errors}):
+        xs = sorted(e["base_x_m"] for e in errors if e["level"] == level)
+        print(f"  level {level:g}: {len(xs)}: " + ", ".join(f"{x:.2f}" for x in xs))
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(text + "\n")
