@@ -90,6 +90,7 @@ def test_the_hlta_classifier_is_the_one_trained_on_walk_views_and_labels_the_cou
 
     meta = json.loads(sidecar_path(HLTA_PATH.parent / _hlta().CONFIG.classifier_checkpoint).read_text())
     assert meta["dataset"]["train_images"] > 3000  # version 1 has 480 training images
+    assert meta["evaluations"]["test_split"]["accuracy"] >= 0.975  # terrain-images 2.1.0's test split
     assert meta["evaluations"]["mixed_course"]["accuracy"] >= 0.95
 
 
