@@ -66,17 +66,19 @@ def main() -> None:
         for seed in task.seeds(args.episodes):
             env.reset(seed=seed)
             paint_terrain(env.sim, CAMERA_GROUND_RGB)
-            images, where = [], []
+            images, steps, xs = [], [], []  # per frame: image, control step, base x [m]
             for step, state, image in cpg_camera_shots(env, args.every):
                 images.append(image)
-                where.append((step, float(state.base_pos_m[0])))
-                truths.append(TERRAIN_CLASSES.index(mixed_segment_at(float(state.base_pos_m[0]) + args.lookahead)))
+                steps.append(step)
+                xs.append(float(state.base_pos_m[0]))
+            truth = [TERRAIN_CLASSES.index(mixed_segment_at(x + args.lookahead)) for x in xs]
             predicted = predict(model, np.stack(images)).tolist()
+            truths.extend(truth)
             labels.extend(predicted)
-            on_obstacles.extend(x + args.lookahead <= obstacle_end_x_m for _, x in where)
+            on_obstacles.extend(x + args.lookahead <= obstacle_end_x_m for x in xs)
             errors.extend({"level": level, "seed": int(seed), "step": st, "base_x_m": round(x, 3),
                            "truth": TERRAIN_CLASSES[t], "label": TERRAIN_CLASSES[p]}
-                          for (st, x), t, p in zip(where, truths[-len(images):], predicted) if t != p)
+                          for st, x, t, p in zip(steps, xs, truth, predicted) if t != p)
         env.close()
     report = evaluate(np.array(truths), np.array(labels))
     kept = np.array(on_obstacles)

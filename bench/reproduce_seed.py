@@ -37,7 +37,8 @@ def _selected(folder: Path) -> dict:
 
 
 def _training_end(folder: Path) -> dict:
-    """The run's last checkpoint as its run.json states it: training episodes and metrics, machine."""
+    """The run's last checkpoint as its run.json states it: env steps, training episodes and metrics, and
+    the wall time of the whole run [s] (a manifest entry's wall time is its selected checkpoint's)."""
     run = json.loads((folder / "training" / "run.json").read_text())
     last = run["checkpoints"][-1]
     return {k: last.get(k) for k in ("env_steps", "episodes", "success_rate", "mean_episode_reward", "wall_time_s")}
@@ -74,7 +75,7 @@ def main() -> None:
     success = statistics.interquartile_mean([rerun.scores(list(agg.levels))])
     report = {
         "rerun": str(args.rerun), "original": str(original_folder),
-        "command": new_entry.get("command"), "rerun_wall_time_s": new_entry.get("wall_time_s"),
+        "command": new_entry.get("command"),
         "checkpoint_identical": new_entry["sha256"] == old_entry["sha256"],
         "selected_env_steps": {"rerun": new_entry.get("env_steps"), "original": old_entry.get("env_steps")},
         "episodes_identical": same, "episodes": len(old_eps),

@@ -50,8 +50,8 @@ def register(app: typer.Typer) -> None:
         if seeds is not None:
             _train_batch(file, terrain, seeds, out, engine, address, parallel, dict(
                 total_steps=steps, workers=workers, checkpoint_every_s=checkpoint_every_s, csv_every_s=csv_every_s,
-                checkpoint_every_steps=checkpoint_every_steps, overrides=override, device=device, init_from=init_from, fixed_level=level, curriculum=curriculum,
-                value_warmup_steps=value_warmup), progress)
+                checkpoint_every_steps=checkpoint_every_steps, overrides=override, device=device, init_from=init_from,
+                fixed_level=level, curriculum=curriculum, value_warmup_steps=value_warmup), progress)
             return
         if "," in terrain or engine != "local" or address or parallel is not None:
             typer.secho("error: several terrains, --engine, --address and --parallel are for a batch of runs: "

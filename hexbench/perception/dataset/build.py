@@ -45,7 +45,8 @@ from hexbench.perception.views import (
     sample_views,
 )
 
-DATASET_VERSIONS: dict[int, str] = {1: "1.0.0", 2: "2.1.0"}  # --version -> the manifest's version (2.0.0: every walk frame)
+# --version -> the manifest's version (2.0.0 kept every walk frame; hexbench/perception/dataset/walks.py)
+DATASET_VERSIONS: dict[int, str] = {1: "1.0.0", 2: "2.1.0"}
 MANIFEST_NAME = "manifest.json"
 SPLITS: tuple[str, ...] = ("train", "test")
 SPLIT_STREAM = 1_000_003  # rng stream id for the train/test assignment
