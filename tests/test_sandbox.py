@@ -253,3 +253,40 @@ def test_the_run_folder_the_seed_key_and_the_working_directory_stay_hidden(tmp_p
                                    "--workers", "1", "--no-record", "--out", str(tmp_path / "out"),
                                    "--seed-key", str(key), "--isolation", "bubblewrap"])
     assert res.exit_code == 0, res.output
+
+
+
+@pytest.mark.parametrize("isolation", ["auto", "process"])
+def test_the_controller_process_runs_the_evaluators_own_hexbench(tmp_path, isolation):
+    """An evaluator imported from another checkout than the installed hexbench (a second worktree
+    on PYTHONPATH) runs its controller host from that checkout too, and only that package is
+    visible to the sandbox."""
+    import shutil
+    import subprocess
+    import sys
+
+    checkout = tmp_path / "checkout"
+    shutil.copytree(REPO / "hexbench", checkout / "hexbench", ignore=shutil.ignore_patterns("__pycache__"))
+    path = controller(tmp_path, f'''
+        import hexbench
+        from pathlib import Path
+        def check(self):
+            assert Path(hexbench.__file__).parent == Path({str(checkout / "hexbench")!r}), hexbench.__file__
+        ''')
+    script = textwrap.dedent(f'''
+        import hexbench
+        from hexbench.evaluation import sandbox
+        from hexbench.evaluation.episode import EpisodeJob, run_episode
+        from hexbench.suite.tasks import load_suite
+        assert hexbench.__file__.startswith({str(checkout)!r}), hexbench.__file__
+        task = load_suite("v1").task("stairs", 2)
+        job = EpisodeJob({path!r}, task, 0, task.seeds(1)[0], max_steps=2,
+                         isolation=sandbox.resolve_isolation({isolation!r}))
+        print("steps", run_episode(job)["steps"])
+        sandbox.close_all()
+        ''')
+    env = {**os.environ, "PYTHONPATH": str(checkout), "HEXBENCH_TASKS_DIR": str(REPO / "tasks")}
+    done = subprocess.run([sys.executable, "-c", script], env=env, cwd=tmp_path, capture_output=True, text=True,
+                          timeout=300)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "steps 2" in done.stdout

@@ -64,6 +64,16 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 CPU_SAMPLE_EVERY_CALLS = 64  # how often the controller's CPU time is sampled (the sample a slow call is measured from)
 
 
+def controller_host_boot() -> str:
+    """The controller process's program: hexbench's controller host, imported from the package this
+    evaluator runs (`python -I` ignores PYTHONPATH, and an installed hexbench may be another checkout
+    than the one evaluating; only this package's folder is visible in the sandbox)."""
+    from hexbench.artifacts.provenance import PACKAGE_DIR
+
+    return (f"import sys; sys.path.insert(0, {str(PACKAGE_DIR.parent)!r}); "
+            "from hexbench.evaluation.controller_host import main; main(sys.argv)")
+
+
 class _Deadline:
     """When to give up on an answer: CPU time of the controller (from the latest sample: at most
     CPU_SAMPLE_EVERY_CALLS calls old, so it may include a few ms of earlier calls) and wall time."""
@@ -115,7 +125,7 @@ class ControllerProcess:
         self._stderr = open(Path(self._tmp) / "stderr", "w+b")
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
-        host = [sys.executable, "-I", "-B", "-m", "hexbench.evaluation.controller_host", str(to_child_r), str(from_child_w),
+        host = [sys.executable, "-I", "-B", "-c", controller_host_boot(), str(to_child_r), str(from_child_w),
                 "on" if seccomp_available() else "off"]
         drop = runs_as_nobody(self.path)
         if self.isolation == "bubblewrap":
