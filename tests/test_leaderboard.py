@@ -661,3 +661,52 @@ def test_table5_records_show_beside_the_papers_row_on_the_courses_page(tmp_path)
     (board / "courses" / "table5" / "wrong.json").write_text(json.dumps(wrong))
     errors = lb.build(board).errors
     assert len(errors) == 1 and "slopes 6 is not a paper Table 5 task; valid: slopes 10, 11" in errors[0]
+
+
+def test_a_record_of_paper_table_5_tasks_is_admitted_by_replay_into_its_own_folder(tmp_path, tiny_protocol):
+    """Some levels of slopes (Table 5's 10 deg) instead of the full run: replayed, filed under
+    courses/table5/ as <label>-<terrain>.json, shown with its tier on the courses page."""
+    from conftest import TINY_PROTOCOL
+
+    from hexbench.artifacts.records import episodes_digest
+    from hexbench.evaluation.evaluate import evaluate
+    from hexbench.suite.scoring import summarize_levels, summarize_terrains
+
+    (tiny_protocol / "protocol_v1.toml").write_text(TINY_PROTOCOL.replace("levels = [6]", "levels = [6, 10]"))
+    table5_task = load_suite("v1").task("slopes", 10)
+    run = tmp_path / "run"
+    assert evaluate(str(REPO / "baselines" / "cpg.py"), [table5_task], run, workers=1, record=False,
+                    progress=False).error is None
+    board = tmp_path / "lb"
+    board.mkdir()
+    dest = lb.add(run, board, workers=1)
+    assert dest == board / "courses" / "table5" / "cpg-slopes.json"
+    entry = json.loads(dest.read_text())
+    assert entry["admission"]["episodes_replayed"] == entry["admission"]["episodes_total"] == 2
+    with pytest.raises(lb.RecordError, match="already exists; pass --replace"):
+        lb.add(run, board, workers=1)
+    lb.build(board)
+    page = (board / "courses" / "README.md").read_text()
+    assert "| cpg | " in page.split("### slopes")[1] and "sandboxed + replayed" in page.split("### slopes")[1]
+
+    # a self-consistent forgery (a success, summaries and digest recomputed) is refused by the replay
+    forged_run = tmp_path / "forged"
+    shutil.copytree(run, forged_run)
+    record = json.loads((forged_run / "result.json").read_text())
+    record["label"] = "forged"
+    record["episodes"][0].update(success=True, end_reason="success", time_to_goal_s=0.5)
+    units, headroom = {"slopes": "deg"}, {("slopes", 10.0): False}
+    record["levels"] = summarize_levels(record["episodes"], units, headroom)
+    record["terrains"] = summarize_terrains(record["levels"])
+    record["episodes_digest"] = episodes_digest(record["episodes"])
+    (forged_run / "result.json").write_text(json.dumps(record))
+    with pytest.raises(lb.RecordError, match="refused: .*success: recorded"):
+        lb.add(forged_run, board, workers=1)
+    assert sorted(p.name for p in (board / "courses" / "table5").iterdir()) == ["cpg-slopes.json"]
+
+    # a record of levels outside Table 5 (slopes 6) is no Table 5 record and not a full run: refused
+    other = tmp_path / "other"
+    assert evaluate(str(REPO / "baselines" / "cpg.py"), [load_suite("v1").task("slopes", 6)], other, workers=1,
+                    record=False, progress=False).error is None
+    with pytest.raises(lb.RecordError, match=r"missing episode .*joins only on paper Table 5's tasks \(slopes 10, 11"):
+        lb.add(other, board, workers=1)

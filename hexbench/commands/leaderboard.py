@@ -57,7 +57,9 @@ def register(app: typer.Typer) -> None:
         seed_run: Path = typer.Option(None, "--seed-run", help="admit the run as this seed-run folder's record "
                                       "(baselines/seeds/<method>-<terrain>-seed<S>/result-<terrain>.json) instead"),
     ) -> None:
-        """Validate a run's record, replay its episodes from their action logs, copy it in with its admission, rebuild."""
+        """Validate a run's record, replay its episodes from their action logs, copy it in with its admission, rebuild.
+
+        Full runs go to DIR, mixed-course runs to DIR/courses/, paper Table 5's tasks to DIR/courses/table5/."""
 
         from hexbench.errors import HexbenchError
         from hexbench.evaluation import engines

@@ -4,7 +4,8 @@ A measured record comes with its run folder; `admit` replays its episodes from t
 (hexbench.replay.verify, all of them or a sample) and adds the admission block that binds the
 record's rows, by their digest, to that replay. `--replace` overwrites a record of the same name,
 never with a less proven one (a lower trust tier, or the same tier with a smaller share replayed).
-Labels are unique across the folder; extra-course records go to `courses/`. `add_seed_run` admits a
+Labels are unique across the folder; extra-course records go to `courses/`, records of paper Table 5's
+tasks (some slopes and stairs levels) to `courses/table5/`. `add_seed_run` admits a
 seed run's record (baselines/seeds/<method>-<terrain>-seed<S>/result-<terrain>.json) the same way.
 """
 
@@ -15,7 +16,15 @@ import re
 from pathlib import Path
 
 from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit
-from hexbench.leaderboard.courses import COURSES_DIR, is_course_record
+from hexbench.leaderboard.courses import (
+    COURSES_DIR,
+    PAPER_TABLE_5,
+    TABLE5_DIR,
+    is_course_record,
+    is_table5_record,
+    table5_file_name,
+    table5_row,
+)
 from hexbench.leaderboard.generate import GENERATED_FILES, write_all_atomically
 from hexbench.leaderboard.records import (
     TIER_ORDER,
@@ -29,7 +38,7 @@ from hexbench.leaderboard.records import (
     rows_of,
 )
 from hexbench.replay.verify import verify_run
-from hexbench.suite.tasks import DEFAULT_PROTOCOL
+from hexbench.suite.tasks import DEFAULT_PROTOCOL, format_level
 
 
 def slug(label: str) -> str:
@@ -86,6 +95,25 @@ def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest:
             raise RecordError(f"{where}: label {clash[0]!r} is already used by {path}; choose another label")
 
 
+def _check_table5_terrains_are_free(row: Row, record: dict, directory: Path, dest: Path, where: Path) -> None:
+    """On Table 5's page a label appears once per terrain: RecordError if another record of the same
+    label and protocol in `directory` covers one of this record's terrains."""
+    terrains = {t["terrain"] for t in row.terrains}
+    for path in record_files(directory):
+        if path.resolve() == dest.resolve():
+            continue
+        try:
+            other = read_record(path)
+        except RecordError:
+            continue
+        if other.get("label") != record["label"] or other.get("protocol") != record["protocol"]:
+            continue
+        clash = sorted(terrains & {e.get("terrain") for e in other.get("episodes", [])})
+        if clash:
+            raise RecordError(f"{where}: {record['label']!r} on {clash[0]} is already recorded by {path}; "
+                              f"pass --replace with a record of the same terrains, or choose another label")
+
+
 def _refuse_downgrade(dest: Path, record: dict, where: str) -> None:
     """--replace never puts a less proven record in place of a more proven one."""
     try:
@@ -112,24 +140,41 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
     result_path, run_dir = _admission_source(Path(result_path))
     directory = Path(directory)
     record = read_record(result_path)
-    if is_course_record(record):  # extra courses are scored apart, in their own folder
-        rows = [measured_row(record, str(result_path), course=True)]
+    table5 = is_table5_record(record)
+    if is_course_record(record) or table5:  # extra courses and Table 5 are scored apart, in folders of their own
         if not directory.is_dir():
             raise RecordError(f"{directory}: no such leaderboard directory")
-        directory = directory / COURSES_DIR
-        directory.mkdir(exist_ok=True)
+        if table5:
+            rows = [table5_row(record, str(result_path))]
+            directory = directory / COURSES_DIR / TABLE5_DIR
+        else:
+            rows = [measured_row(record, str(result_path), course=True)]
+            directory = directory / COURSES_DIR
+        directory.mkdir(parents=True, exist_ok=True)
     else:
-        rows = rows_of(record, str(result_path))
+        try:
+            rows = rows_of(record, str(result_path))
+        except RecordError as e:
+            if "missing episode" not in str(e):
+                raise
+            raise RecordError(f"{e}; a record of some levels joins only on paper Table 5's tasks ("
+                              + "; ".join(f"{t} {', '.join(format_level(v) for v in levels)}"
+                                          for t, levels in PAPER_TABLE_5.items()) + ")") from None
     if record["protocol"] != protocol:
         raise RecordError(f"{result_path}: record is protocol {record['protocol']}, this leaderboard shows {protocol} "
                           "(records of different protocols are never mixed; pass --protocol to choose)")
     if not directory.is_dir():
         raise RecordError(f"{directory}: no such leaderboard directory")
-    name = "paper_reference.json" if record["kind"] == "reported" else f"{slug(record['label'])}.json"
-    dest = directory / name
-    if name in GENERATED_FILES:
-        raise RecordError(f"{result_path}: label {record['label']!r} would overwrite a generated file")
-    _check_labels_are_free(rows, record, directory, dest, result_path)
+    if table5:
+        name = table5_file_name(slug(record["label"]), rows[0])
+        dest = directory / name
+        _check_table5_terrains_are_free(rows[0], record, directory, dest, result_path)
+    else:
+        name = "paper_reference.json" if record["kind"] == "reported" else f"{slug(record['label'])}.json"
+        dest = directory / name
+        if name in GENERATED_FILES:
+            raise RecordError(f"{result_path}: label {record['label']!r} would overwrite a generated file")
+        _check_labels_are_free(rows, record, directory, dest, result_path)
     if dest.exists() and dest.resolve() != result_path.resolve() and not replace:
         raise RecordError(f"{dest} already exists; pass --replace to overwrite it")
     if record["kind"] == "measured":

@@ -49,6 +49,33 @@ def load_course_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadR
     return result
 
 
+def is_table5_record(record: dict) -> bool:
+    """A measured record whose episodes all lie on paper Table 5's tasks (some slopes and stairs levels)."""
+    try:
+        tasks = {(e["terrain"], float(e["level"])) for e in record["episodes"]}
+    except (KeyError, TypeError, ValueError):
+        return False
+    return record.get("kind") == "measured" and bool(tasks) \
+        and all(level in PAPER_TABLE_5.get(terrain, {}) for terrain, level in tasks)
+
+
+def table5_row(record: dict, where: str) -> Row:
+    """The row of a record of Table 5's tasks (every seed of each level it covers); RecordError if refused."""
+    row = measured_row(record, where, levels_covered=True)
+    outside = sorted({f"{lv['terrain']} {format_level(lv['level'])}" for lv in row.levels
+                      if lv["level"] not in PAPER_TABLE_5.get(lv["terrain"], {})})
+    if outside:
+        raise RecordError(f"{where}: {', '.join(outside)} is not a paper Table 5 task; valid: "
+                          + "; ".join(f"{t} {', '.join(format_level(v) for v in levels)}"
+                                      for t, levels in PAPER_TABLE_5.items()))
+    return row
+
+
+def table5_file_name(label_slug: str, row: Row) -> str:
+    """`<label>-<terrain>[-<terrain>].json`: one file per controller and terrains covered."""
+    return f"{label_slug}-{'-'.join(sorted({t['terrain'] for t in row.terrains}))}.json"
+
+
 def load_table5_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
     """Records of Table 5's tasks: some levels of slopes and stairs, every seed of each level."""
     result = LoadResult([], [], [])
@@ -58,14 +85,7 @@ def load_table5_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadR
             if record.get("protocol") != protocol:
                 result.skipped.append(f"{path}: protocol {record.get('protocol')!r}, not {protocol!r}")
                 continue
-            row = measured_row(record, str(path), levels_covered=True)
-            outside = sorted({f"{lv['terrain']} {format_level(lv['level'])}" for lv in row.levels
-                              if lv["level"] not in PAPER_TABLE_5.get(lv["terrain"], {})})
-            if outside:
-                raise RecordError(f"{path}: {', '.join(outside)} is not a paper Table 5 task; valid: "
-                                  + "; ".join(f"{t} {', '.join(format_level(v) for v in levels)}"
-                                              for t, levels in PAPER_TABLE_5.items()))
-            result.rows.append(row)
+            result.rows.append(table5_row(record, str(path)))
         except RecordError as e:
             result.errors.append(str(e))
     return result
@@ -85,7 +105,7 @@ def _table5_section(rows: list[Row], suite: Suite, context: list[Row]) -> list[s
         return out + ["No records yet.\n"]
     for terrain, paper in PAPER_TABLE_5.items():
         levels = list(paper)
-        unit = suite.task(terrain, levels[0]).unit
+        unit = next(t.unit for t in suite.all_tasks if t.terrain == terrain)  # also where a protocol lacks a level
         header = ["Controller"] + [f"{format_level(v)} {unit}" for v in levels] + ["Trust", "Record", "git commit"]
         table = [["paper Table 5 (reported, not run here)"] + [f"{100 * paper[v]:.0f}%" for v in levels] + ["", "", ""]]
         for r in sorted((r for r in rows if r.terrain(terrain)), key=lambda r: r.label):
