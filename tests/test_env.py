@@ -10,7 +10,16 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from hexbench.world.env import CPG_PARAM_HIGH, CPG_PARAM_LOW, NO_NOISE, OBS_DIM, EnvConfig, HexapodEnv, ObservationNoise
+from hexbench.world.env import (
+    CPG_PARAM_HIGH,
+    CPG_PARAM_LOW,
+    NO_NOISE,
+    OBS_DIM,
+    EnvConfig,
+    HexapodEnv,
+    ObservationNoise,
+    cpg_params_action,
+)
 from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, total_reward
 
 ZERO18 = np.zeros(18, dtype=np.float32)
@@ -175,6 +184,31 @@ def test_cpg_params_mode_maps_onto_the_paper_ranges(make_env, action: float, exp
     np.testing.assert_allclose(got, expected)
     np.testing.assert_array_equal(info["a_c"], env.cpg.joint_angles())
     np.testing.assert_array_equal(info["a_r"], 0.0)
+
+
+def test_the_wide_gait_mode_reaches_the_cpgs_own_gait_which_the_papers_ranges_clip(make_env) -> None:
+    """cpg_params_wide: A2 up to 1.2 and A3 up to 1.0, so the HRL action for the CPG's gait (section
+    2.2: omega pi, A1 0.45, A2 1.2, A3 1.0) drives the CPG as it walks on its own; cpg_params clips
+    A2 and A3 to 1.0 and 0.5."""
+    gait = (math.pi, 0.45, 1.2, 1.0)
+    cpg = make_env(action_mode="cpg_residual")
+    cpg.reset(seed=3)
+    clipped, wide = make_env(action_mode="cpg_params"), make_env(action_mode="cpg_params_wide")
+    clipped.reset(seed=3)
+    wide.reset(seed=3)
+    clipped_off_rad = 0.0
+    for _ in range(120):  # two seconds: one gait cycle
+        _, _, _, _, own = cpg.step(np.zeros(18, dtype=np.float32))
+        _, _, _, _, held = wide.step(np.asarray(cpg_params_action(*gait, "cpg_params_wide"), dtype=np.float32))
+        _, _, _, _, paper = clipped.step(np.asarray(cpg_params_action(*gait), dtype=np.float32))
+        np.testing.assert_allclose(held["a_t"], own["a_t"], atol=1e-6)  # float32 actions: A1 0.45 to 1e-8
+        clipped_off_rad = max(clipped_off_rad, float(np.max(np.abs(paper["a_t"] - own["a_t"]))))
+    p = wide.cpg.params
+    np.testing.assert_allclose((p.knee_amplitude_rad, p.ankle_amplitude_rad), (1.2, 1.0))
+    p = clipped.cpg.params
+    np.testing.assert_allclose((p.knee_amplitude_rad, p.ankle_amplitude_rad), (1.0, 0.5))
+    assert clipped_off_rad > 0.1  # the knee and ankle swing less than the CPG's
+    assert wide.action_space.shape == (4,)
 
 
 # -------------------------------------------------------------------------------- reward

@@ -246,7 +246,15 @@ def test_record_lists_the_weights_files_a_trained_baseline_loads(tmp_path):
     assert listed[0]["sha256"] == hashlib.sha256(weights.read_bytes()).hexdigest()
 
 
-@pytest.mark.parametrize("baseline", sorted(p.name for p in (REPO / "baselines").glob("*.py")))
+# Recipes whose seed runs are still being trained and measured: no shipped weights yet. The mark is
+# strict, so this entry must go when the recipe ships its weights.
+NOT_SHIPPED_YET = {"hrl_wide.py": "recipe added in 0.1.0; its weights ship once its seed runs are measured"}
+
+
+@pytest.mark.parametrize("baseline", [
+    pytest.param(name, marks=pytest.mark.xfail(reason=NOT_SHIPPED_YET[name], strict=True))
+    if name in NOT_SHIPPED_YET else name
+    for name in sorted(p.name for p in (REPO / "baselines").glob("*.py"))])
 def test_every_shipped_baseline_acts_from_its_weights_on_every_terrain(baseline):
     """A fresh clone can run each baseline: its weights (verified by sha256) are there for every terrain."""
     res = invoke(["check", str(REPO / "baselines" / baseline), "--steps", "3"])

@@ -4,7 +4,7 @@ A baseline file (baselines/*.py) defines a frozen config dataclass at its top an
 Every config has these fields, read here and by hexbench.training (settings, envs, warm_start):
 
     algo           "ppo", "sac" or "td3" (the Stable-Baselines3 class)
-    action_mode    "joint", "cpg_residual" or "cpg_params" (see hexbench.world.env)
+    action_mode    "joint", "cpg_residual", "cpg_params" or "cpg_params_wide" (see hexbench.world.env)
     net_arch       hidden layer sizes, e.g. (256, 256, 256, 256) (the policy; the critic too unless below)
     critic_net_arch (optional; SAC, TD3) the critics' hidden layer sizes when they differ from net_arch
     activation     "relu" or "tanh"
@@ -39,7 +39,7 @@ import numpy as np
 from hexbench.artifacts.files import atomic_path, sha256_file
 from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
 from hexbench.errors import HexbenchError
-from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, TARGET_X_INDEX
+from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, TARGET_X_INDEX, action_size
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
@@ -143,7 +143,7 @@ def config_dict(config) -> dict:
 
 
 def action_dim(action_mode: str) -> int:
-    return 4 if action_mode == "cpg_params" else 18
+    return action_size(action_mode)
 
 
 def build_policy(config):

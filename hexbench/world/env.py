@@ -11,7 +11,9 @@ Action modes (all Box(-1, 1) so every learner sees a normalised space):
   cpg_residual  a_t = a_c + eps a_r (eq. 6): a_r in [-1, 1]^18 [rad], a_c the CPG's joint angles,
                 eps 0.6 rough / 0.4 slopes / 0.3 stairs by default (paper 3.2);
   cpg_params    HRL: a in [-1, 1]^4 maps linearly onto omega_swing in [pi/2, pi] rad/s,
-                A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (paper 4.3).
+                A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (paper 4.3);
+  cpg_params_wide  the same with A2 in [-0.5, 1.2] and A3 in [-1, 1]: not in the paper; its ranges
+                exclude the paper's own CPG gait (A2 = 1.2, A3 = 1.0, section 2.2), these contain it.
 
 Episode end: the rules of hexbench.world.protocol (fall, |y| > 0.8 m, success at 2.5 m ahead, an
 optional stall rule that the evaluation protocol turns on, all `terminated`; or the
@@ -38,19 +40,33 @@ from hexbench.world.robot import NUM_JOINTS, JetHexaSpec
 from hexbench.world.sim import PhysicsConfig, Simulation, _clip
 from hexbench.world.terrain import TERRAIN_KINDS, make_terrain
 
-ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params")
+ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params", "cpg_params_wide")
 # The mixed course takes the largest eps, so that a controller switching policies (HLTA) can send
 # each policy's residual unclipped (see baselines/hlta.py).
 DEFAULT_RESIDUAL_SCALE: dict[str, float] = {"rough": 0.6, "slopes": 0.4, "stairs": 0.3, "flat": 0.6, "mixed": 0.6}
 # HRL parameter ranges (paper 4.3): omega_swing [rad/s], A1, A2, A3.
 CPG_PARAM_LOW = np.array([math.pi / 2, -1.0, -0.5, -1.0])
 CPG_PARAM_HIGH = np.array([math.pi, 1.0, 1.0, 0.5])
+# The gait-parameter action modes and their ranges (low, high): cpg_params_wide reaches the paper's
+# CPG gait (A2 1.2, A3 1.0), which the paper's HRL ranges clip to 1.0 and 0.5.
+CPG_PARAM_RANGES: dict[str, tuple[np.ndarray, np.ndarray]] = {
+    "cpg_params": (CPG_PARAM_LOW, CPG_PARAM_HIGH),
+    "cpg_params_wide": (CPG_PARAM_LOW, np.array([math.pi, 1.0, 1.2, 1.0])),
+}
 
 
-def cpg_params_action(omega_swing: float, a1: float, a2: float, a3: float) -> tuple[float, ...]:
-    """The cpg_params action in [-1, 1]^4 for a gait (omega_swing [rad/s], A1, A2, A3), each clipped to its range."""
-    params = np.clip(np.array([omega_swing, a1, a2, a3], dtype=np.float64), CPG_PARAM_LOW, CPG_PARAM_HIGH)
-    return tuple(float(a) for a in (params - CPG_PARAM_LOW) / (CPG_PARAM_HIGH - CPG_PARAM_LOW) * 2.0 - 1.0)
+def cpg_params_action(omega_swing: float, a1: float, a2: float, a3: float,
+                      action_mode: str = "cpg_params") -> tuple[float, ...]:
+    """The action in [-1, 1]^4 of a gait-parameter mode for a gait (omega_swing [rad/s], A1, A2, A3),
+    each clipped to the mode's range."""
+    low, high = CPG_PARAM_RANGES[action_mode]
+    params = np.clip(np.array([omega_swing, a1, a2, a3], dtype=np.float64), low, high)
+    return tuple(float(a) for a in (params - low) / (high - low) * 2.0 - 1.0)
+
+
+def action_size(action_mode: str) -> int:
+    """Length of an action of `action_mode`: 4 gait parameters, else one value per joint."""
+    return 4 if action_mode in CPG_PARAM_RANGES else NUM_JOINTS
 
 
 OBS_DIM = 62
@@ -160,7 +176,8 @@ class HexapodEnv(gym.Env):
         self.render_mode = render_mode
         self.sim = Simulation(config.robot, config.physics)
         self.cpg = HopfCPG(config.cpg, dt_s=config.physics.control_dt_s)
-        n_act = 4 if config.action_mode == "cpg_params" else NUM_JOINTS
+        n_act = action_size(config.action_mode)
+        self._gait_low, self._gait_high = CPG_PARAM_RANGES.get(config.action_mode, (None, None))
         self.action_space = gym.spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
         self._action_low, self._action_high = np.full(n_act, -1.0), np.full(n_act, 1.0)
         self.observation_space = gym.spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
@@ -219,8 +236,8 @@ class HexapodEnv(gym.Env):
         if mode == "joint":
             a_t = self._joint_mid + self._joint_half * action
             return a_t, np.zeros(NUM_JOINTS), a_t
-        if mode == "cpg_params":
-            params = CPG_PARAM_LOW + (action + 1.0) * 0.5 * (CPG_PARAM_HIGH - CPG_PARAM_LOW)
+        if self._gait_low is not None:  # cpg_params, cpg_params_wide
+            params = self._gait_low + (action + 1.0) * 0.5 * (self._gait_high - self._gait_low)
             self.cpg.set_params(self.config.cpg.with_gait(*params))
             a_c = self.cpg.step()
             return a_c, a_c, np.zeros(NUM_JOINTS)
