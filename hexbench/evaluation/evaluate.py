@@ -270,6 +270,7 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
         timing[job.episode_id] = (journal.invocation, started_at, elapsed_s)
 
     engine = engines.current()
+    engine_record = {"name": engine.name, "description": engine.describe()}  # where the run started (nodes may leave)
     _play_all(engine, todo, len(jobs), workers, label, progress, finished)
     rows = [done[j.episode_id] for j in jobs]
     run_started_at, wall_time_s = run_time([*timing.values(), (journal.invocation, started_at,
@@ -277,7 +278,7 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
                        started_at=run_started_at, wall_time_s=wall_time_s, workers=workers, command=command,
                        checkpoints=checkpoints, commit=commit, isolation=sandbox.isolation_record(mode, limits, controller_file),
-                       seed_set=seed_set.record(), engine={"name": engine.name, "description": engine.describe()})
+                       seed_set=seed_set.record(), engine=engine_record)
     import pandas as pd
 
     ordered = sorted(jobs, key=lambda j: (j.task.terrain, j.task.level, j.index))
