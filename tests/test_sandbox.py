@@ -287,6 +287,6 @@ def test_the_controller_process_runs_the_evaluators_own_hexbench(tmp_path, isola
         ''')
     env = {**os.environ, "PYTHONPATH": str(checkout), "HEXBENCH_TASKS_DIR": str(REPO / "tasks")}
     done = subprocess.run([sys.executable, "-c", script], env=env, cwd=tmp_path, capture_output=True, text=True,
-                          timeout=300)
+                          timeout=300, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "steps 2" in done.stdout

@@ -78,9 +78,8 @@ def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None 
     return admitted
 
 
-def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest: Path, where: Path) -> None:
-    """RecordError if another record of the same protocol in `directory` already uses one of the labels."""
-    new_labels = {r.label for r in rows}
+def _other_records(directory: Path, dest: Path, protocol: str):
+    """(path, record) of every readable record of `protocol` in `directory` other than `dest`."""
     for path in record_files(directory):
         if path.resolve() == dest.resolve():
             continue
@@ -88,10 +87,18 @@ def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest:
             other = read_record(path)
         except RecordError:
             continue
+        if other.get("protocol") == protocol:
+            yield path, other
+
+
+def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest: Path, where: Path) -> None:
+    """RecordError if another record of the same protocol in `directory` already uses one of the labels."""
+    new_labels = {r.label for r in rows}
+    for path, other in _other_records(directory, dest, record["protocol"]):
         other_labels = ({s["label"] for s in other.get("reported", {}).get("series", [])}
                         if other.get("kind") == "reported" else {other.get("label")})
         clash = sorted(new_labels & other_labels)
-        if clash and other.get("protocol") == record["protocol"]:
+        if clash:
             raise RecordError(f"{where}: label {clash[0]!r} is already used by {path}; choose another label")
 
 
@@ -99,17 +106,9 @@ def _check_table5_terrains_are_free(row: Row, record: dict, directory: Path, des
     """On Table 5's page a label appears once per terrain: RecordError if another record of the same
     label and protocol in `directory` covers one of this record's terrains."""
     terrains = {t["terrain"] for t in row.terrains}
-    for path in record_files(directory):
-        if path.resolve() == dest.resolve():
-            continue
-        try:
-            other = read_record(path)
-        except RecordError:
-            continue
-        if other.get("label") != record["label"] or other.get("protocol") != record["protocol"]:
-            continue
+    for path, other in _other_records(directory, dest, record["protocol"]):
         clash = sorted(terrains & {e.get("terrain") for e in other.get("episodes", [])})
-        if clash:
+        if other.get("label") == record["label"] and clash:
             raise RecordError(f"{where}: {record['label']!r} on {clash[0]} is already recorded by {path}; "
                               f"pass --replace with a record of the same terrains, or choose another label")
 
