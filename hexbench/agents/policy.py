@@ -91,7 +91,7 @@ def validate_config(config, where: str = "CONFIG") -> None:
         raise ConfigError(f"{where}: decision_interval_steps must be an integer >= 1 (control steps); got {interval!r}")
     initial_action = getattr(config, "initial_action", None)
     if initial_action is not None:
-        n = action_dim(config.action_mode)
+        n = action_size(config.action_mode)
         if config.algo != "ppo":
             raise ConfigError(f"{where}: initial_action is supported for algo 'ppo' only, not {config.algo!r}")
         if len(initial_action) != n or not all(-1.0 <= float(a) <= 1.0 for a in initial_action):
@@ -134,16 +134,12 @@ def action_noise(config):
         return None
     from stable_baselines3.common.noise import NormalActionNoise
 
-    n = action_dim(config.action_mode)
+    n = action_size(config.action_mode)
     return NormalActionNoise(mean=np.zeros(n), sigma=np.full(n, float(std)))
 
 
 def config_dict(config) -> dict:
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(config).items()}
-
-
-def action_dim(action_mode: str) -> int:
-    return action_size(action_mode)
 
 
 def build_policy(config):
@@ -153,7 +149,7 @@ def build_policy(config):
     from hexbench.world.env import OBS_HIGH
 
     obs_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
-    act_space = gym.spaces.Box(-1.0, 1.0, (action_dim(config.action_mode),), dtype=np.float32)
+    act_space = gym.spaces.Box(-1.0, 1.0, (action_size(config.action_mode),), dtype=np.float32)
     cls = algo_class(config.algo)
     policy_cls = cls.policy_aliases["MlpPolicy"]
     # gSDE (a PPO constructor argument, which SB3 hands to its policy) changes the shape of log_std

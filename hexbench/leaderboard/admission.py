@@ -18,12 +18,12 @@ from pathlib import Path
 from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit
 from hexbench.leaderboard.courses import (
     COURSES_DIR,
-    PAPER_TABLE_5,
     TABLE5_DIR,
     is_course_record,
     is_table5_record,
     table5_file_name,
     table5_row,
+    table5_tasks_text,
 )
 from hexbench.leaderboard.generate import GENERATED_FILES, write_all_atomically
 from hexbench.leaderboard.records import (
@@ -38,7 +38,7 @@ from hexbench.leaderboard.records import (
     rows_of,
 )
 from hexbench.replay.verify import verify_run
-from hexbench.suite.tasks import DEFAULT_PROTOCOL, format_level
+from hexbench.suite.tasks import DEFAULT_PROTOCOL
 
 
 def slug(label: str) -> str:
@@ -156,9 +156,8 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
         except RecordError as e:
             if "missing episode" not in str(e):
                 raise
-            raise RecordError(f"{e}; a record of some levels joins only on paper Table 5's tasks ("
-                              + "; ".join(f"{t} {', '.join(format_level(v) for v in levels)}"
-                                          for t, levels in PAPER_TABLE_5.items()) + ")") from None
+            raise RecordError(f"{e}; a record of some levels joins only on paper Table 5's tasks "
+                              f"({table5_tasks_text()})") from None
     if record["protocol"] != protocol:
         raise RecordError(f"{result_path}: record is protocol {record['protocol']}, this leaderboard shows {protocol} "
                           "(records of different protocols are never mixed; pass --protocol to choose)")

@@ -49,6 +49,11 @@ def load_course_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadR
     return result
 
 
+def table5_tasks_text() -> str:
+    """Table 5's tasks as one line: 'slopes 10, 11, ...; stairs 5.5, 6, ...'."""
+    return "; ".join(f"{t} {', '.join(format_level(v) for v in levels)}" for t, levels in PAPER_TABLE_5.items())
+
+
 def is_table5_record(record: dict) -> bool:
     """A measured record whose episodes all lie on paper Table 5's tasks (some slopes and stairs levels)."""
     try:
@@ -65,9 +70,7 @@ def table5_row(record: dict, where: str) -> Row:
     outside = sorted({f"{lv['terrain']} {format_level(lv['level'])}" for lv in row.levels
                       if lv["level"] not in PAPER_TABLE_5.get(lv["terrain"], {})})
     if outside:
-        raise RecordError(f"{where}: {', '.join(outside)} is not a paper Table 5 task; valid: "
-                          + "; ".join(f"{t} {', '.join(format_level(v) for v in levels)}"
-                                      for t, levels in PAPER_TABLE_5.items()))
+        raise RecordError(f"{where}: {', '.join(outside)} is not a paper Table 5 task; valid: {table5_tasks_text()}")
     return row
 
 
