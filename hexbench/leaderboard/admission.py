@@ -29,6 +29,7 @@ from hexbench.leaderboard.generate import GENERATED_FILES, write_all_atomically
 from hexbench.leaderboard.records import (
     TIER_ORDER,
     TIER_SELF_REPORTED,
+    MissingEpisodesError,
     RecordError,
     Row,
     measured_row,
@@ -153,9 +154,7 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
     else:
         try:
             rows = rows_of(record, str(result_path))
-        except RecordError as e:
-            if "missing episode" not in str(e):
-                raise
+        except MissingEpisodesError as e:
             raise RecordError(f"{e}; a record of some levels joins only on paper Table 5's tasks "
                               f"({table5_tasks_text()})") from None
     if record["protocol"] != protocol:

@@ -43,6 +43,10 @@ class RecordError(HexbenchError, ValueError):
     """A record was refused; the message is one line naming the file and the problem."""
 
 
+class MissingEpisodesError(RecordError):
+    """A record lacks episodes its protocol has (a record of some levels only)."""
+
+
 @dataclass(frozen=True)
 class Row:
     """One controller as the leaderboard shows it: per-level and per-terrain summaries.
@@ -161,7 +165,7 @@ def _check_episodes(record: dict, suite: Suite, where: str, tasks: tuple | None 
     if missing:
         terrain, level, i, s = missing[0]
         more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
-        raise RecordError(f"{where}: missing episode {terrain} {level} index {i} (seed {s}){more}; every seed of "
+        raise MissingEpisodesError(f"{where}: missing episode {terrain} {level} index {i} (seed {s}){more}; every seed of "
                           f"every level of protocol {suite.protocol} must be present")
 
 
