@@ -69,6 +69,20 @@ def test_label_names_gsde_a_warm_start_its_warm_up_and_own_curriculum(tmp_path):
     assert "value warm-up 50,000" in label and "curriculum 18:0.5:21" in label
 
 
+def test_label_names_an_off_policy_recipes_exploration_update_ratio_and_critics(tmp_path):
+    folder = write_run(tmp_path / "td3-rough-seed1", "td3", 100, [50, 100])
+    run = json.loads((folder / "run.json").read_text())
+    run["config"].update(action_noise_std=0.1, train_freq=4, gradient_steps=1, critic_net_arch=[256, 256],
+                         net_arch=[256, 256, 256, 256])
+    (folder / "run.json").write_text(json.dumps(run))
+    _, label, _ = load_progress(folder)
+    assert "action noise std 0.1" in label and "0.25 updates per env step, critics [256, 256]" in label
+    run["config"].update(train_freq=1, gradient_steps=-1, critic_net_arch=None)  # SB3: as many as collected
+    (folder / "run.json").write_text(json.dumps(run))
+    _, label, _ = load_progress(folder)
+    assert "1 update per env step, critics [256, 256, 256, 256]" in label
+
+
 def test_bands_average_the_seeds_of_a_recipe_with_a_t_interval_and_need_run_json(tmp_path):
     import numpy as np
     from scipy import stats

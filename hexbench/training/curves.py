@@ -96,6 +96,13 @@ def recipe_description(run: dict) -> str:
         label += (f" (gSDE, matrix std {std:.2f}, new every {cfg.get('sde_sample_freq')} steps" if cfg.get("use_sde")
                   else f" (std {std:.2f}")
         label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
+    if cfg.get("action_noise_std") is not None:  # TD3's exploration: Gaussian noise on the action
+        label += f" (action noise std {cfg['action_noise_std']:g})"
+    if cfg.get("train_freq") is not None:  # off-policy: updates per env step and critic size
+        steps = cfg.get("gradient_steps") or 1  # SB3: -1 means as many updates as env steps collected
+        updates = 1.0 if steps < 0 else steps / cfg["train_freq"]
+        critics = cfg.get("critic_net_arch") or cfg.get("net_arch") or ()
+        label += f", {updates:g} update{'' if updates == 1 else 's'} per env step, critics [{', '.join(str(n) for n in critics)}]"
     if (cfg.get("decision_interval_steps") or 1) != 1:
         label += f", a decision every {cfg['decision_interval_steps']} control steps"
     if run.get("init_from"):
