@@ -211,6 +211,30 @@ def test_the_wide_gait_mode_reaches_the_cpgs_own_gait_which_the_papers_ranges_cl
     assert wide.action_space.shape == (4,)
 
 
+def test_the_steering_mode_turns_the_cpgs_gait_by_scaling_each_sides_hip_stride(make_env) -> None:
+    """cpg_params_steer: the wide gait ranges plus a turn u = 0.3 a[4]; with no turn it sends the
+    CPG's joint targets, with a turn the right hips swing (1 + u) and the left (1 - u) times the
+    CPG's, knees and ankles untouched (info's a_r: the targets less the CPG's), and the robot turns
+    left for u > 0."""
+    gait = (math.pi, 0.45, 1.2, 1.0)
+    cpg, straight, left = (make_env(action_mode=m) for m in ("cpg_residual", "cpg_params_steer", "cpg_params_steer"))
+    for env in (cpg, straight, left):
+        env.reset(seed=3)
+    no_turn = np.asarray(cpg_params_action(*gait, "cpg_params_steer"), dtype=np.float32)
+    turn = np.asarray(cpg_params_action(*gait, "cpg_params_steer", turn=0.2), dtype=np.float32)
+    assert straight.action_space.shape == (5,) and no_turn[4] == 0.0 and turn[4] == pytest.approx(2 / 3)
+    for _ in range(240):  # four seconds: two gait cycles
+        _, _, _, _, own = cpg.step(np.zeros(18, dtype=np.float32))
+        _, _, _, _, held = straight.step(no_turn)
+        obs, _, _, _, turning = left.step(turn)
+        np.testing.assert_allclose(held["a_t"], own["a_t"], atol=1e-6)
+        np.testing.assert_allclose(turning["a_c"], own["a_c"], atol=1e-6)
+        side = np.repeat([1.0, 1.0, 1.0, -1.0, -1.0, -1.0], 3) * np.tile([1.0, 0.0, 0.0], 6)
+        np.testing.assert_allclose(turning["a_r"], own["a_c"] * 0.2 * side, atol=1e-6)  # a_t - a_c, before sending
+    assert obs[59] > 0.15  # yaw [rad]: it turned left
+    assert cpg_params_action(*gait, "cpg_params_steer", turn=1.0)[4] == 1.0  # a turn beyond 0.3 is clipped
+
+
 # -------------------------------------------------------------------------------- reward
 def test_table1_weights() -> None:
     w = TABLE1_WEIGHTS

@@ -27,7 +27,7 @@ def test_every_suite_level_curriculum_and_flat_is_registered_for_every_mode() ->
         expected |= {f"hexbench/{t}-Curriculum-{m}-v1" for t in ("Rough", "Slopes", "Stairs")}
         expected.add(f"hexbench/Flat-{m}-v1")
     assert set(IDS) == expected
-    assert len(IDS) == len(ACTION_MODES) * (len(SUITE.all_tasks) + 3 + 1) == 200  # 43 full-run levels + 3 mixed-course levels
+    assert len(IDS) == len(ACTION_MODES) * (len(SUITE.all_tasks) + 3 + 1) == 250  # 43 full-run levels + 3 mixed-course levels
     assert "hexbench/Stairs-5.5cm-CpgResidual-v1" in IDS
     assert "hexbench/Slopes-24deg-Joint-v1" in IDS
     assert "hexbench/Rough-3cm-CpgParams-v1" in IDS

@@ -24,11 +24,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from hexbench.world.cpg import NUM_LEGS, CPGParams, HopfCPG
+from hexbench.world.cpg import LEG_SIDE, NUM_LEGS, CPGParams, HopfCPG
 from hexbench.world.env import BASE_Y_INDEX, BASE_YAW_INDEX, TARGET_Y_INDEX
 
-# legs in the CPG's order RF, RM, RB, LB, LM, LF: +1 right, -1 left
-LEG_SIDE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])
 JOINTS_PER_LEG = 3
 
 

@@ -4,7 +4,7 @@ A baseline file (baselines/*.py) defines a frozen config dataclass at its top an
 Every config has these fields, read here and by hexbench.training (settings, envs, warm_start):
 
     algo           "ppo", "sac" or "td3" (the Stable-Baselines3 class)
-    action_mode    "joint", "cpg_residual", "cpg_params" or "cpg_params_wide" (see hexbench.world.env)
+    action_mode    "joint", "cpg_residual", "cpg_params", "cpg_params_wide" or "cpg_params_steer" (hexbench.world.env)
     net_arch       hidden layer sizes, e.g. (256, 256, 256, 256) (the policy; the critic too unless below)
     critic_net_arch (optional; SAC, TD3) the critics' hidden layer sizes when they differ from net_arch
     activation     "relu" or "tanh"

@@ -6,7 +6,7 @@ A controller file is a Python file that defines
 
 where a Controller is any object with
 
-    action_mode: str                 # "joint", "cpg_residual", "cpg_params" or "cpg_params_wide" (see env.py)
+    action_mode: str                 # one of hexbench.world.env.ACTION_MODES: "joint", "cpg_residual", "cpg_params", ...
     def reset(self, seed: int) -> None
     def act(self, obs: np.ndarray) -> np.ndarray   # (62,) float32 in, action in [-1, 1] out
 

@@ -35,7 +35,7 @@ else:  # pragma: no cover
 
 DEFAULT_PROTOCOL = "v1"
 MODE_IDS: dict[str, str] = {"joint": "Joint", "cpg_residual": "CpgResidual", "cpg_params": "CpgParams",
-                            "cpg_params_wide": "CpgParamsWide"}
+                            "cpg_params_wide": "CpgParamsWide", "cpg_params_steer": "CpgParamsSteer"}
 PROTOCOL_TERRAINS: tuple[str, ...] = ("rough", "slopes", "stairs")
 CURRICULUM_TERRAINS: tuple[str, ...] = ("rough", "slopes", "stairs")  # hexbench.training.wrappers.CURRICULA
 ENV_ENTRY_POINT = "hexbench.world.env:HexapodEnv"

@@ -30,6 +30,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 NUM_LEGS = 6
+# Side of each leg, in the order RF, RM, RB, LB, LM, LF: +1 right, -1 left (turning scales the sides' strides apart)
+LEG_SIDE = np.array([1.0, 1.0, 1.0, -1.0, -1.0, -1.0])
 # Desired phase of each leg [rad], legs in order RF, RM, RB, LB, LM, LF: tripods {RF, RB, LM}, {RM, LB, LF}.
 TRIPOD_PHASES_RAD: tuple[float, ...] = (0.0, math.pi, 0.0, math.pi, 0.0, math.pi)
 

@@ -13,7 +13,12 @@ Action modes (all Box(-1, 1) so every learner sees a normalised space):
   cpg_params    HRL: a in [-1, 1]^4 maps linearly onto omega_swing in [pi/2, pi] rad/s,
                 A1 in [-1, 1], A2 in [-0.5, 1], A3 in [-1, 0.5] (paper 4.3);
   cpg_params_wide  the same with A2 in [-0.5, 1.2] and A3 in [-1, 1]: not in the paper; its ranges
-                exclude the paper's own CPG gait (A2 = 1.2, A3 = 1.0, section 2.2), these contain it.
+                exclude the paper's own CPG gait (A2 = 1.2, A3 = 1.0, section 2.2), these contain it;
+  cpg_params_steer  cpg_params_wide plus a fifth value, a turn u = 0.3 a[4]: the right legs' hip
+                stride is (1 + u) times the CPG's and the left legs' (1 - u) times (u > 0 turns
+                left; the turn of hexbench.agents.heading). Not in the paper: a gait chosen from
+                four symmetric parameters cannot steer against the drift that ends episodes at
+                |y| > 0.8 m.
 
 Episode end: the rules of hexbench.world.protocol (fall, |y| > 0.8 m, success at 2.5 m ahead, an
 optional stall rule that the evaluation protocol turns on, all `terminated`; or the
@@ -33,14 +38,14 @@ from dataclasses import dataclass, field, replace
 import gymnasium as gym
 import numpy as np
 
-from hexbench.world.cpg import CPGParams, HopfCPG
+from hexbench.world.cpg import LEG_SIDE, CPGParams, HopfCPG
 from hexbench.world.protocol import EpisodeJudge, EpisodeRules
 from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, reward_terms, total_reward
 from hexbench.world.robot import NUM_JOINTS, JetHexaSpec
 from hexbench.world.sim import PhysicsConfig, Simulation, _clip
 from hexbench.world.terrain import TERRAIN_KINDS, make_terrain
 
-ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params", "cpg_params_wide")
+ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params", "cpg_params_wide", "cpg_params_steer")
 # The mixed course takes the largest eps, so that a controller switching policies (HLTA) can send
 # each policy's residual unclipped (see baselines/hlta.py).
 DEFAULT_RESIDUAL_SCALE: dict[str, float] = {"rough": 0.6, "slopes": 0.4, "stairs": 0.3, "flat": 0.6, "mixed": 0.6}
@@ -53,20 +58,29 @@ CPG_PARAM_RANGES: dict[str, tuple[np.ndarray, np.ndarray]] = {
     "cpg_params": (CPG_PARAM_LOW, CPG_PARAM_HIGH),
     "cpg_params_wide": (CPG_PARAM_LOW, np.array([math.pi, 1.0, 1.2, 1.0])),
 }
+CPG_PARAM_RANGES["cpg_params_steer"] = CPG_PARAM_RANGES["cpg_params_wide"]
+# The gait-parameter modes with a fifth action value, the turn, and its largest magnitude (a side's
+# hip stride changes by at most this fraction of the CPG's; as hexbench.agents.heading's default).
+STEER_MAX_TURN: dict[str, float] = {"cpg_params_steer": 0.3}
 
 
 def cpg_params_action(omega_swing: float, a1: float, a2: float, a3: float,
-                      action_mode: str = "cpg_params") -> tuple[float, ...]:
+                      action_mode: str = "cpg_params", turn: float = 0.0) -> tuple[float, ...]:
     """The action in [-1, 1]^4 of a gait-parameter mode for a gait (omega_swing [rad/s], A1, A2, A3),
-    each clipped to the mode's range."""
+    each clipped to the mode's range; a steering mode appends the turn u (clipped to its largest)."""
     low, high = CPG_PARAM_RANGES[action_mode]
     params = np.clip(np.array([omega_swing, a1, a2, a3], dtype=np.float64), low, high)
-    return tuple(float(a) for a in (params - low) / (high - low) * 2.0 - 1.0)
+    action = tuple(float(a) for a in (params - low) / (high - low) * 2.0 - 1.0)
+    if action_mode in STEER_MAX_TURN:
+        action += (float(np.clip(turn / STEER_MAX_TURN[action_mode], -1.0, 1.0)),)
+    return action
 
 
 def action_size(action_mode: str) -> int:
-    """Length of an action of `action_mode`: 4 gait parameters, else one value per joint."""
-    return 4 if action_mode in CPG_PARAM_RANGES else NUM_JOINTS
+    """Length of an action of `action_mode`: 4 gait parameters (and a turn), else one value per joint."""
+    if action_mode in CPG_PARAM_RANGES:
+        return 5 if action_mode in STEER_MAX_TURN else 4
+    return NUM_JOINTS
 
 
 OBS_DIM = 62
@@ -178,6 +192,7 @@ class HexapodEnv(gym.Env):
         self.cpg = HopfCPG(config.cpg, dt_s=config.physics.control_dt_s)
         n_act = action_size(config.action_mode)
         self._gait_low, self._gait_high = CPG_PARAM_RANGES.get(config.action_mode, (None, None))
+        self._max_turn = STEER_MAX_TURN.get(config.action_mode)
         self.action_space = gym.spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
         self._action_low, self._action_high = np.full(n_act, -1.0), np.full(n_act, 1.0)
         self.observation_space = gym.spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
@@ -236,11 +251,15 @@ class HexapodEnv(gym.Env):
         if mode == "joint":
             a_t = self._joint_mid + self._joint_half * action
             return a_t, np.zeros(NUM_JOINTS), a_t
-        if self._gait_low is not None:  # cpg_params, cpg_params_wide
-            params = self._gait_low + (action + 1.0) * 0.5 * (self._gait_high - self._gait_low)
+        if self._gait_low is not None:  # cpg_params, cpg_params_wide, cpg_params_steer
+            params = self._gait_low + (action[:4] + 1.0) * 0.5 * (self._gait_high - self._gait_low)
             self.cpg.set_params(self.config.cpg.with_gait(*params))
             a_c = self.cpg.step()
-            return a_c, a_c, np.zeros(NUM_JOINTS)
+            if self._max_turn is None:
+                return a_c, a_c, np.zeros(NUM_JOINTS)
+            a_t = a_c.copy()  # the turn: each side's hip stride scaled, (1 + u) right, (1 - u) left
+            a_t[0::3] *= 1.0 + LEG_SIDE * (self._max_turn * float(action[4]))
+            return a_t, a_c, a_t - a_c
         a_c = self.cpg.step()
         return a_c + self._eps * action, a_c, action
 
