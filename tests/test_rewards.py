@@ -1,17 +1,18 @@
-"""The training reward option `early_end_penalty` (hexbench.training.wrappers.EarlyEndPenalty): an
-early end other than success never pays."""
+"""The training reward options that price an episode's end (hexbench.training.wrappers): with
+`early_end_penalty` an early end other than success never pays; with `arrival_bonus` staying near the
+goal never pays more than arriving."""
 
 import numpy as np
 import pytest
 
-from hexbench.training.wrappers import EarlyEndPenalty, early_end_penalty
+from hexbench.training.wrappers import ArrivalBonus, arrival_bonus, early_end_penalty, with_end_terms
 from hexbench.world.env import EnvConfig, HexapodEnv
 from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor
 
 
-def _first_end(penalty: bool, **rules):
+def _first_end(penalty: bool, bonus: bool = False, **rules):
     env = HexapodEnv(EnvConfig(terrain="rough", level=7, **rules))
-    env = EarlyEndPenalty(env) if penalty else env
+    env = with_end_terms(env, penalty, bonus)
     env.reset(seed=5)
     try:
         for _ in range(600):
@@ -40,3 +41,20 @@ def test_success_and_the_step_limit_are_not_penalised():
     plain, reason = _first_end(False, max_steps=3)
     penalised, _ = _first_end(True, max_steps=3)
     assert reason == "step_limit" and penalised == plain
+
+
+def test_an_arrival_earns_the_discounted_most_that_staying_near_the_goal_could():
+    plain, reason = _first_end(False, goal_distance_m=0.05)
+    rewarded, reason2 = _first_end(False, True, goal_distance_m=0.05)
+    assert reason == reason2 == "success"
+    w = TABLE1_WEIGHTS["rough"]
+    expected = (1 + difficulty_factor("rough", 7)) * (w.distance * 9.0 + w.heading + w.tilt) / (1 - 0.99)
+    assert rewarded - plain == pytest.approx(expected)
+    assert arrival_bonus(w) == pytest.approx(2800.0)  # r_d at most 1/0.1 m - 1 = 9, r_theta and r_r at most 1
+    # the other ends are not rewarded, and both options together price each end once
+    for rules in ({"max_lateral_deviation_m": 0.002}, {"max_steps": 3}):
+        assert _first_end(False, True, **rules)[0] == _first_end(False, **rules)[0]
+    both, _ = _first_end(True, True, max_lateral_deviation_m=0.002)
+    penalised, _ = _first_end(True, max_lateral_deviation_m=0.002)
+    assert both == penalised
+    assert isinstance(with_end_terms(HexapodEnv(EnvConfig(terrain="rough")), True, True), ArrivalBonus)

@@ -14,6 +14,8 @@ Every config has these fields, read here and by hexbench.training (settings, env
     initial_action (optional; PPO) the policy's mean action before training (hexbench.training.warm_start)
     decision_interval_steps (optional, default 1) the policy decides every K control steps and its
                    action is held between, in training and in evaluation (hexbench.training.wrappers)
+    early_end_penalty, arrival_bonus (optional, default False) training reward terms for how an
+                   episode ends (hexbench.training.wrappers)
 
 and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
 
@@ -45,7 +47,7 @@ ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 # Config fields that are not SB3 constructor arguments.
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
-                                           "log_std_init", "action_noise_std", "early_end_penalty",
+                                           "log_std_init", "action_noise_std", "early_end_penalty", "arrival_bonus",
                                            "normalize_reward", "initial_action", "decision_interval_steps",
                                            "critic_net_arch"})
 

@@ -62,6 +62,8 @@ def curriculum_env(config, terrain: str, protocol: str = "v1") -> gym.Env:
     kwargs = {"residual_scale": config.residual_scale} if config.action_mode == "cpg_residual" else {}
     if getattr(config, "early_end_penalty", False):
         kwargs["early_end_penalty"] = True
+    if getattr(config, "arrival_bonus", False):
+        kwargs["arrival_bonus"] = True
     register_envs(protocol)
     return ScaledObservation(gym.make(curriculum_id(terrain, config.action_mode, protocol), **kwargs))
 

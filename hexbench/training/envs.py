@@ -25,8 +25,8 @@ from hexbench.training.wrappers import (
     Curriculum,
     CurriculumWrapper,
     DecisionInterval,
-    EarlyEndPenalty,
     make_curriculum_env,
+    with_end_terms,
 )
 from hexbench.world.env import EnvConfig, HexapodEnv
 
@@ -57,19 +57,21 @@ class TrainingWrapper(ScaledObservation):
 
 def make_training_env(terrain: str, action_mode: str, residual_scale: float | None,
                       fixed_level: float | None = None, early_end_penalty: bool = False,
-                      curriculum: Curriculum | None = None, decision_interval_steps: int = 1) -> gym.Env:
+                      curriculum: Curriculum | None = None, decision_interval_steps: int = 1,
+                      arrival_bonus: bool = False) -> gym.Env:
     """The curriculum env of paper 4.1 (or another curriculum, or with fixed_level that level alone),
-    noise on, with the early-end penalty if asked, monitored (episode returns with the penalty and
+    noise on, with the early-end penalty and the arrival bonus if asked, monitored (episode returns with the penalty and
     lengths in control steps), with actions held for `decision_interval_steps` control steps."""
     from stable_baselines3.common.monitor import Monitor
 
     if fixed_level is None:
         env = make_curriculum_env(terrain, action_mode, residual_scale=residual_scale,
-                                  early_end_penalty=early_end_penalty, curriculum=curriculum)
+                                  early_end_penalty=early_end_penalty, arrival_bonus=arrival_bonus,
+                                  curriculum=curriculum)
     else:
         env = HexapodEnv(EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode,
                                    residual_scale=residual_scale))
-        env = EarlyEndPenalty(env) if early_end_penalty else env
+        env = with_end_terms(env, early_end_penalty, arrival_bonus)
     env = Monitor(env)
     if decision_interval_steps != 1:
         env = DecisionInterval(env, decision_interval_steps)
@@ -79,12 +81,12 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
 def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
                  fixed_level: float | None = None, early_end_penalty: bool = False,
                  normalize_reward_gamma: float | None = None, curriculum: Curriculum | None = None,
-                 decision_interval_steps: int = 1):
+                 decision_interval_steps: int = 1, arrival_bonus: bool = False):
     """The workers' envs as one VecEnv; with normalize_reward_gamma, rewards are normalised (VecNormalize)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty,
-                         curriculum, decision_interval_steps) for _ in range(workers)]
+                         curriculum, decision_interval_steps, arrival_bonus) for _ in range(workers)]
     venv = DummyVecEnv(factories) if workers == 1 else SubprocVecEnv(factories, start_method="fork")
     if normalize_reward_gamma is None:
         return venv
@@ -92,11 +94,11 @@ def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: f
 
 
 def make_run_vec_env(settings, config):
-    """The VecEnv of a run: its terrain, config (action mode, eps, penalty, reward normalisation) and options."""
+    """The VecEnv of a run: its terrain, config (action mode, eps, end terms, reward normalisation) and options."""
     return make_vec_env(settings.terrain, config.action_mode, settings.workers, config.residual_scale,
                         settings.fixed_level, getattr(config, "early_end_penalty", False),
                         config.gamma if getattr(config, "normalize_reward", False) else None, settings.curriculum,
-                        getattr(config, "decision_interval_steps", 1))
+                        getattr(config, "decision_interval_steps", 1), getattr(config, "arrival_bonus", False))
 
 
 def reward_normalizer_state(venv) -> dict | None:

@@ -12,6 +12,14 @@
                       every early end other than success with (1 + delta) w_d / (1 - gamma): since
                       r_d > -1, that bounds the discounted loss of staying alive, so ending the
                       episode never pays.
+  ArrivalBonus        the training reward option `arrival_bonus` (not in the paper), the mirror
+                      of the penalty: r_d grows to 9 as d falls to 0.1 m, and an arrival ends the
+                      episode, so an agent that can steer (HRL-steer) learned to circle just short
+                      of the goal line and collect r_d rather than arrive. The bonus pays every
+                      arrival (1 + delta) (w_d (1/0.1 m - 1) + w_theta + w_r) / (1 - gamma): the
+                      most r_d, r_theta and r_r can pay per step, discounted forever, so staying
+                      never pays more than arriving (r_h, stairs only at weight 0.01 per cm above
+                      12 cm, is left out).
 
   DecisionInterval    the config option `decision_interval_steps` (not in the paper): the policy
                       decides every K control steps and its action is held for K steps (summed
@@ -32,7 +40,7 @@ from dataclasses import dataclass
 import gymnasium as gym
 
 from hexbench.world.env import HexapodEnv
-from hexbench.world.rewards import TABLE1_WEIGHTS, RewardWeights, difficulty_factor
+from hexbench.world.rewards import MIN_DISTANCE_M, TABLE1_WEIGHTS, RewardWeights, difficulty_factor
 
 EARLY_END_GAMMA = 0.99  # the discount the early-end penalty bounds the loss of staying alive with
 
@@ -58,6 +66,12 @@ CURRICULA: dict[str, Curriculum] = {
 def early_end_penalty(weights: RewardWeights, gamma: float = EARLY_END_GAMMA) -> float:
     """The (negative) reward, before the (1 + delta) factor, for an early end other than success."""
     return -weights.distance / (1.0 - gamma)
+
+
+def arrival_bonus(weights: RewardWeights, gamma: float = EARLY_END_GAMMA) -> float:
+    """The reward, before the (1 + delta) factor, added on arrival (an end by success)."""
+    most_per_step = weights.distance * (1.0 / MIN_DISTANCE_M - 1.0) + weights.heading + weights.tilt
+    return most_per_step / (1.0 - gamma)
 
 
 class CurriculumWrapper(gym.Wrapper):
@@ -115,19 +129,47 @@ class EarlyEndPenalty(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
+class ArrivalBonus(gym.Wrapper):
+    """Adds (1 + delta) arrival_bonus(Table 1 weights) to the reward of an arrival."""
+
+    def __init__(self, env: gym.Env, gamma: float = EARLY_END_GAMMA):
+        super().__init__(env)
+        self._terrain = env.unwrapped.config.terrain
+        self._bonus = arrival_bonus(TABLE1_WEIGHTS[self._terrain], gamma)
+        self._delta = 0.0
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._delta = difficulty_factor(self._terrain, info["level"])
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if terminated and info["end_reason"] == "success":
+            reward += (1.0 + self._delta) * self._bonus
+        return obs, reward, terminated, truncated, info
+
+
+def with_end_terms(env: gym.Env, early_end_penalty: bool, arrival_bonus: bool) -> gym.Env:
+    """`env` with the training reward options that price an episode's end."""
+    env = EarlyEndPenalty(env) if early_end_penalty else env
+    return ArrivalBonus(env) if arrival_bonus else env
+
+
 def make_curriculum_env(terrain: str, action_mode: str = "cpg_residual", *, residual_scale: float | None = None,
-                        early_end_penalty: bool = False, curriculum: Curriculum | dict | None = None,
-                        **env_fields) -> gym.Env:
+                        early_end_penalty: bool = False, arrival_bonus: bool = False,
+                        curriculum: Curriculum | dict | None = None, **env_fields) -> gym.Env:
     """The training environment of paper 4.1 for a terrain: its curriculum (or `curriculum`, a
     Curriculum or its fields as a dict), observation noise on, no stall rule; with
-    `early_end_penalty`, the penalty too. `env_fields` are further EnvConfig fields (hexbench.world.env)."""
+    `early_end_penalty` and `arrival_bonus`, those too. `env_fields` are further EnvConfig fields
+    (hexbench.world.env)."""
     if isinstance(curriculum, dict):
         curriculum = Curriculum(**curriculum)
     if curriculum is None and terrain not in CURRICULA:
         raise ValueError(f"no training curriculum for terrain {terrain!r}; terrains with one: {', '.join(CURRICULA)}")
     env = HexapodEnv(terrain=terrain, action_mode=action_mode, residual_scale=residual_scale, **env_fields)
     env = CurriculumWrapper(env, curriculum or CURRICULA[terrain])
-    return EarlyEndPenalty(env) if early_end_penalty else env
+    return with_end_terms(env, early_end_penalty, arrival_bonus)
 
 
 class DecisionInterval(gym.Wrapper):
