@@ -81,6 +81,10 @@ def test_label_names_an_off_policy_recipes_exploration_update_ratio_and_critics(
     (folder / "run.json").write_text(json.dumps(run))
     _, label, _ = load_progress(folder)
     assert "1 update per env step, critics [256, 256, 256, 256]" in label
+    run["config"].update(action_noise_std=0.0, arrival_bonus=True)  # SAC adds no action noise
+    (folder / "run.json").write_text(json.dumps(run))
+    _, label, _ = load_progress(folder)
+    assert "action noise" not in label and "arrival bonus" in label
 
 
 def test_bands_average_the_seeds_of_a_recipe_with_a_t_interval_and_need_run_json(tmp_path):

@@ -96,7 +96,7 @@ def recipe_description(run: dict) -> str:
         label += (f" (gSDE, matrix std {std:.2f}, new every {cfg.get('sde_sample_freq')} steps" if cfg.get("use_sde")
                   else f" (std {std:.2f}")
         label += ", normalised rewards)" if cfg.get("normalize_reward") else ")"
-    if cfg.get("action_noise_std") is not None:  # TD3's exploration: Gaussian noise on the action
+    if cfg.get("action_noise_std"):  # TD3's exploration: Gaussian noise on the action (SAC's is 0: none)
         label += f" (action noise std {cfg['action_noise_std']:g})"
     if cfg.get("train_freq") is not None:  # off-policy: updates per env step and critic size
         steps = cfg.get("gradient_steps") or 1  # SB3: -1 means as many updates as env steps collected
@@ -112,6 +112,8 @@ def recipe_description(run: dict) -> str:
     if run.get("curriculum_levels"):
         c = run["curriculum_levels"]
         label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
+    if cfg.get("arrival_bonus"):
+        label += ", arrival bonus"
     if not cfg.get("early_end_penalty", False):
         label += ", no early-end penalty"  # the reward of Table 1 as written (docs/training.md)
     return label
