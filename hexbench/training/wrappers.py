@@ -108,46 +108,52 @@ class CurriculumWrapper(gym.Wrapper):
         self.successes = int(successes)
 
 
-class EarlyEndPenalty(gym.Wrapper):
+class _EndReward(gym.Wrapper):
+    """Adds (1 + delta) times a fixed reward [before delta] on the step an episode ends, for the ends
+    `pays(end_reason)` picks; the reward comes from the terrain's Table 1 weights."""
+
+    def __init__(self, env: gym.Env, reward_of_weights, gamma: float = EARLY_END_GAMMA):
+        super().__init__(env)
+        self._terrain = env.unwrapped.config.terrain
+        self._end_reward = reward_of_weights(TABLE1_WEIGHTS[self._terrain], gamma)
+        self._delta = 0.0
+
+    @staticmethod
+    def pays(end_reason: str) -> bool:
+        raise NotImplementedError
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._delta = difficulty_factor(self._terrain, info["level"])
+        return obs, info
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if terminated and self.pays(info["end_reason"]):
+            reward += (1.0 + self._delta) * self._end_reward
+        return obs, reward, terminated, truncated, info
+
+
+class EarlyEndPenalty(_EndReward):
     """Adds (1 + delta) early_end_penalty(Table 1 weights) to the reward of an early end other than success."""
 
     def __init__(self, env: gym.Env, gamma: float = EARLY_END_GAMMA):
-        super().__init__(env)
-        self._terrain = env.unwrapped.config.terrain
-        self._penalty = early_end_penalty(TABLE1_WEIGHTS[self._terrain], gamma)
-        self._delta = 0.0
+        super().__init__(env, early_end_penalty, gamma)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._delta = difficulty_factor(self._terrain, info["level"])
-        return obs, info
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        if terminated and info["end_reason"] != "success":
-            reward += (1.0 + self._delta) * self._penalty
-        return obs, reward, terminated, truncated, info
+    @staticmethod
+    def pays(end_reason: str) -> bool:
+        return end_reason != "success"
 
 
-class ArrivalBonus(gym.Wrapper):
+class ArrivalBonus(_EndReward):
     """Adds (1 + delta) arrival_bonus(Table 1 weights) to the reward of an arrival."""
 
     def __init__(self, env: gym.Env, gamma: float = EARLY_END_GAMMA):
-        super().__init__(env)
-        self._terrain = env.unwrapped.config.terrain
-        self._bonus = arrival_bonus(TABLE1_WEIGHTS[self._terrain], gamma)
-        self._delta = 0.0
+        super().__init__(env, arrival_bonus, gamma)
 
-    def reset(self, *, seed: int | None = None, options: dict | None = None):
-        obs, info = self.env.reset(seed=seed, options=options)
-        self._delta = difficulty_factor(self._terrain, info["level"])
-        return obs, info
-
-    def step(self, action):
-        obs, reward, terminated, truncated, info = self.env.step(action)
-        if terminated and info["end_reason"] == "success":
-            reward += (1.0 + self._delta) * self._bonus
-        return obs, reward, terminated, truncated, info
+    @staticmethod
+    def pays(end_reason: str) -> bool:
+        return end_reason == "success"
 
 
 def with_end_terms(env: gym.Env, early_end_penalty: bool, arrival_bonus: bool) -> gym.Env:
