@@ -165,8 +165,8 @@ def _check_episodes(record: dict, suite: Suite, where: str, tasks: tuple | None 
     if missing:
         terrain, level, i, s = missing[0]
         more = f" and {len(missing) - 1} more" if len(missing) > 1 else ""
-        raise MissingEpisodesError(f"{where}: missing episode {terrain} {level} index {i} (seed {s}){more}; every seed of "
-                          f"every level of protocol {suite.protocol} must be present")
+        raise MissingEpisodesError(f"{where}: missing episode {terrain} {level} index {i} (seed {s}){more}; "
+                                   f"every seed of every level of protocol {suite.protocol} must be present")
 
 
 def record_tier(record: dict, where: str) -> str:

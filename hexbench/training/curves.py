@@ -102,7 +102,8 @@ def recipe_description(run: dict) -> str:
         steps = cfg.get("gradient_steps") or 1  # SB3: -1 means as many updates as env steps collected
         updates = 1.0 if steps < 0 else steps / cfg["train_freq"]
         critics = cfg.get("critic_net_arch") or cfg.get("net_arch") or ()
-        label += f", {updates:g} update{'' if updates == 1 else 's'} per env step, critics [{', '.join(str(n) for n in critics)}]"
+        label += (f", {updates:g} update{'' if updates == 1 else 's'} per env step, "
+                  f"critics [{', '.join(str(n) for n in critics)}]")
     if (cfg.get("decision_interval_steps") or 1) != 1:
         label += f", a decision every {cfg['decision_interval_steps']} control steps"
     if run.get("init_from"):

@@ -60,8 +60,8 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
                       curriculum: Curriculum | None = None, decision_interval_steps: int = 1,
                       arrival_bonus: bool = False) -> gym.Env:
     """The curriculum env of paper 4.1 (or another curriculum, or with fixed_level that level alone),
-    noise on, with the early-end penalty and the arrival bonus if asked, monitored (episode returns with the penalty and
-    lengths in control steps), with actions held for `decision_interval_steps` control steps."""
+    noise on, with the early-end penalty and the arrival bonus if asked, monitored (episode returns with
+    those terms and lengths in control steps), with actions held for `decision_interval_steps` control steps."""
     from stable_baselines3.common.monitor import Monitor
 
     if fixed_level is None:
