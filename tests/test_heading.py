@@ -90,3 +90,38 @@ def test_brings_a_robot_that_starts_askew_back_on_its_heading():
     assert start_yaw > 0.1  # this seed starts askew
     assert ends["held"][1] < 0.1 < ends["open loop"][1]
     assert ends["held"][2] < ends["open loop"][2]
+
+
+def test_a_steering_modes_turn_value_is_the_holds_turn_in_action_units():
+    from hexbench.agents.heading import turn_action_value, with_held_heading
+
+    hold = HeadingHold(gain=1.0, max_turn=0.3, lookahead_m=1.0)
+    assert turn_action_value(hold, _obs(yaw_rad=0.1), "cpg_params_steer") == pytest.approx(-0.1 / 0.3)
+    assert turn_action_value(hold, _obs(yaw_rad=-2.0), "cpg_params_steer") == 1.0
+    action = with_held_heading(np.array([0.1, 0.2, 0.3, 0.4]), hold, _obs(yaw_rad=0.1), "cpg_params_steer")
+    assert action.shape == (5,) and np.allclose(action[:4], [0.1, 0.2, 0.3, 0.4])
+    with pytest.raises(ValueError, match="has no turn; steering modes: cpg_params_steer"):
+        turn_action_value(hold, _obs(), "cpg_params_wide")
+
+
+def test_the_heading_turn_env_takes_the_gait_alone_and_turns_by_the_hold_at_every_control_step():
+    from hexbench.agents.heading import HeadingTurn
+    from hexbench.world.cpg import LEG_SIDE
+    from hexbench.world.env import HexapodEnv, cpg_params_action
+
+    with pytest.raises(ValueError, match="HeadingTurn needs a steering action mode"):
+        HeadingTurn(HexapodEnv(terrain="flat", action_mode="cpg_params_wide"))
+    env = HeadingTurn(HexapodEnv(terrain="flat", action_mode="cpg_params_steer"))
+    assert env.action_space.shape == (4,)
+    gait = np.asarray(cpg_params_action(math.pi, 0.45, 1.2, 1.0, "cpg_params_wide"), dtype=np.float32)
+    obs, _ = env.reset(seed=3)
+    turns = []
+    for _ in range(90):
+        u = env.hold.turn(obs)  # the turn the step must apply, from the observation before it
+        obs, _, terminated, truncated, info = env.step(gait)
+        turns.append(u)
+        turned, cpg_hips = info["a_r"][0::3], info["a_c"][0::3]  # a_r = a_t - a_c: the turn's part of the hips
+        assert np.allclose(turned, cpg_hips * LEG_SIDE * u, atol=1e-9)
+        assert not (terminated or truncated)
+    assert len({round(u, 6) for u in turns}) > 10  # the turn follows the heading, step by step
+    env.close()

@@ -121,3 +121,36 @@ def _with_critic(config):
 
     cls = make_dataclass("WithCritic", [(k, object) for k in asdict(config)] + [("critic_net_arch", object)], frozen=True)
     return cls(**asdict(config), critic_net_arch=(64,))
+
+
+def test_with_a_heading_hold_the_policy_chooses_the_gait_and_the_hold_turns_at_every_step():
+    from hexbench.agents.heading import BASE_YAW_INDEX, HeadingHold
+
+    class GaitPolicy(RecordingPolicy):
+        def predict(self, obs, deterministic=True):
+            self.seen.append(np.array(obs))
+            return np.array([0.1, 0.2, 0.3, 0.4]), None
+
+    policy, hold = GaitPolicy(), HeadingHold()
+    ctrl = PolicyController("cpg_params_steer", policy, decision_interval_steps=3, heading_hold=hold)
+    for step in range(6):
+        obs = np.zeros(62, np.float32)
+        obs[BASE_YAW_INDEX] = 0.01 * step  # the heading drifts left: the hold turns right, more each step
+        action = ctrl.act(obs)
+        assert action.shape == (5,) and np.allclose(action[:4], [0.1, 0.2, 0.3, 0.4])
+        assert action[4] == pytest.approx(hold.turn(obs) / 0.3)
+    assert len(policy.seen) == 2  # the gait is decided every 3 steps, the turn at every step
+
+
+def test_a_heading_hold_config_builds_a_gait_only_policy_and_needs_a_steering_mode():
+    from dataclasses import replace
+
+    from hexbench.agents.policy import ConfigError, build_policy, validate_config
+
+    config = load_controller_module(REPO / "baselines" / "hrl_hold.py").CONFIG
+    validate_config(config)
+    assert build_policy(config).action_space.shape == (4,)  # the turn is the hold's
+    with pytest.raises(ConfigError, match="heading_hold needs a steering action_mode"):
+        validate_config(replace(config, action_mode="cpg_params_wide"))
+    with pytest.raises(ConfigError, match="initial_action must be 4 numbers"):
+        validate_config(replace(config, initial_action=(0.0,) * 5))

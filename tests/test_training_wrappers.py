@@ -122,3 +122,12 @@ def test_decision_interval_holds_the_action_sums_rewards_and_stops_at_the_episod
     assert env.unwrapped.actions == [0.5, 0.5, 0.5, -0.5, -0.5]
     with pytest.raises(ValueError, match="decision interval must be >= 1"):
         DecisionInterval(Counting(), 0)
+
+
+def test_a_heading_hold_training_env_takes_the_gait_alone_held_for_the_decision_interval():
+    env = make_training_env("rough", "cpg_params_steer", None, decision_interval_steps=30, heading_hold=True)
+    assert env.action_space.shape == (4,)
+    env.reset(seed=1)
+    _, _, _, _, info = env.step(np.zeros(4, dtype=np.float32))
+    assert info["decision_env_steps"] == 30
+    env.close()

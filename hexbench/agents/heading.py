@@ -1,4 +1,4 @@
-"""Heading hold for controllers that act through the CPG (action mode `cpg_residual`).
+"""Heading hold for controllers that act through the CPG (action modes `cpg_residual` and `cpg_params_steer`).
 
 The open-loop tripod gait drifts: on the mixed course (6.3 m) most of the CPG's failures, and of a
 hierarchy built on it, are lateral deviations (|y| > 0.8 m). `HeadingHold` steers back to the
@@ -22,10 +22,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import gymnasium as gym
 import numpy as np
 
 from hexbench.world.cpg import LEG_SIDE, NUM_LEGS, CPGParams, HopfCPG
-from hexbench.world.env import BASE_Y_INDEX, BASE_YAW_INDEX, TARGET_Y_INDEX
+from hexbench.world.env import BASE_Y_INDEX, BASE_YAW_INDEX, STEER_MAX_TURN, TARGET_Y_INDEX
 
 JOINTS_PER_LEG = 3
 
@@ -74,3 +75,45 @@ class HeadingSteering:
         out = np.zeros(NUM_LEGS * JOINTS_PER_LEG)
         out[0::JOINTS_PER_LEG] = LEG_SIDE * (u / self.eps) * a_c[0::JOINTS_PER_LEG]
         return out
+
+
+def turn_action_value(hold: HeadingHold, obs: np.ndarray, action_mode: str) -> float:
+    """The turn value a[4] of a steering action mode (hexbench.world.env, u = STEER_MAX_TURN a[4])
+    that makes the environment turn by the hold's u for this observation."""
+    if action_mode not in STEER_MAX_TURN:
+        raise ValueError(f"action mode {action_mode!r} has no turn; steering modes: {', '.join(STEER_MAX_TURN)}")
+    return max(-1.0, min(1.0, hold.turn(obs) / STEER_MAX_TURN[action_mode]))
+
+
+def with_held_heading(gait_action: np.ndarray, hold: HeadingHold, obs: np.ndarray, action_mode: str) -> np.ndarray:
+    """A steering mode's action: the four gait values a policy chose and the hold's turn for `obs`."""
+    return np.append(np.asarray(gait_action, dtype=np.float64)[:4], turn_action_value(hold, obs, action_mode))
+
+
+class HeadingTurn(gym.Wrapper):
+    """A steering-mode environment seen by a policy that chooses the gait alone: its action is the
+    mode's four gait values, and the hold sets the turn from the latest observation at every control
+    step (as PolicyController does in evaluation). Wrap the raw environment, below any observation
+    scaling and below a DecisionInterval, so the turn follows every control step."""
+
+    def __init__(self, env: gym.Env, hold: HeadingHold | None = None):
+        super().__init__(env)
+        self.action_mode = env.unwrapped.config.action_mode
+        if self.action_mode not in STEER_MAX_TURN:
+            raise ValueError(f"HeadingTurn needs a steering action mode ({', '.join(STEER_MAX_TURN)}); "
+                             f"got {self.action_mode!r}")
+        self.hold = hold or HeadingHold()
+        space = env.action_space
+        self.action_space = gym.spaces.Box(space.low[:4], space.high[:4], dtype=space.dtype)
+        self._obs: np.ndarray | None = None
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        obs, info = self.env.reset(seed=seed, options=options)
+        self._obs = obs
+        return obs, info
+
+    def step(self, action):
+        full = with_held_heading(action, self.hold, self._obs, self.action_mode)
+        obs, reward, terminated, truncated, info = self.env.step(full)
+        self._obs = obs
+        return obs, reward, terminated, truncated, info

@@ -16,6 +16,9 @@ Every config has these fields, read here and by hexbench.training (settings, env
                    action is held between, in training and in evaluation (hexbench.training.wrappers)
     early_end_penalty, arrival_bonus (optional, default False) training reward terms for how an
                    episode ends (hexbench.training.wrappers)
+    heading_hold   (optional, default False; steering action modes) the turn is not learned: a fixed
+                   heading law (hexbench.agents.heading.HeadingHold) sets it every control step, in
+                   training and in evaluation, and the policy chooses the four gait values alone
 
 and every other field is passed unchanged to the SB3 constructor (learning_rate, gamma, ...).
 
@@ -38,10 +41,11 @@ from pathlib import Path
 
 import numpy as np
 
+from hexbench.agents.heading import HeadingHold, with_held_heading
 from hexbench.artifacts.files import atomic_path, sha256_file
 from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
 from hexbench.errors import HexbenchError
-from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, TARGET_X_INDEX, action_size
+from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, STEER_MAX_TURN, TARGET_X_INDEX, action_size
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
@@ -49,7 +53,7 @@ ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
                                            "log_std_init", "action_noise_std", "early_end_penalty", "arrival_bonus",
                                            "normalize_reward", "initial_action", "decision_interval_steps",
-                                           "critic_net_arch"})
+                                           "critic_net_arch", "heading_hold"})
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
 # [rad/s] are divided by 5 to bring them to O(1) like the other groups (positions [rad], torques
@@ -91,14 +95,27 @@ def validate_config(config, where: str = "CONFIG") -> None:
     interval = getattr(config, "decision_interval_steps", 1)
     if not isinstance(interval, int) or isinstance(interval, bool) or interval < 1:
         raise ConfigError(f"{where}: decision_interval_steps must be an integer >= 1 (control steps); got {interval!r}")
+    if getattr(config, "heading_hold", False) and config.action_mode not in STEER_MAX_TURN:
+        raise ConfigError(f"{where}: heading_hold needs a steering action_mode ({', '.join(STEER_MAX_TURN)}); "
+                          f"got {config.action_mode!r}")
     initial_action = getattr(config, "initial_action", None)
     if initial_action is not None:
-        n = action_size(config.action_mode)
+        n = policy_action_size(config)
         if config.algo != "ppo":
             raise ConfigError(f"{where}: initial_action is supported for algo 'ppo' only, not {config.algo!r}")
         if len(initial_action) != n or not all(-1.0 <= float(a) <= 1.0 for a in initial_action):
             raise ConfigError(f"{where}: initial_action must be {n} numbers in [-1, 1] for action_mode "
                               f"{config.action_mode!r}; got {tuple(initial_action)}")
+
+
+def heading_hold(config) -> HeadingHold | None:
+    """The heading law that sets the turn of a config with `heading_hold` (None: the policy acts alone)."""
+    return HeadingHold() if getattr(config, "heading_hold", False) else None
+
+
+def policy_action_size(config) -> int:
+    """The number of values the config's policy outputs: its action mode's, less the turn a heading hold sets."""
+    return action_size(config.action_mode) - (1 if heading_hold(config) is not None else 0)
 
 
 def algo_class(algo: str):
@@ -136,7 +153,7 @@ def action_noise(config):
         return None
     from stable_baselines3.common.noise import NormalActionNoise
 
-    n = action_size(config.action_mode)
+    n = policy_action_size(config)
     return NormalActionNoise(mean=np.zeros(n), sigma=np.full(n, float(std)))
 
 
@@ -151,7 +168,7 @@ def build_policy(config):
     from hexbench.world.env import OBS_HIGH
 
     obs_space = gym.spaces.Box(-OBS_HIGH * OBS_SCALE, OBS_HIGH * OBS_SCALE, dtype=np.float32)
-    act_space = gym.spaces.Box(-1.0, 1.0, (action_size(config.action_mode),), dtype=np.float32)
+    act_space = gym.spaces.Box(-1.0, 1.0, (policy_action_size(config),), dtype=np.float32)
     cls = algo_class(config.algo)
     policy_cls = cls.policy_aliases["MlpPolicy"]
     # gSDE (a PPO constructor argument, which SB3 hands to its policy) changes the shape of log_std
@@ -233,7 +250,8 @@ class PolicyController:
     """A trained SB3 policy behind the hexbench Controller protocol (deterministic actions)."""
 
     def __init__(self, action_mode: str, policy, checkpoint_sha256: str = "", checkpoint_path: Path | None = None,
-                 target_horizon_m: float | None = None, decision_interval_steps: int = 1):
+                 target_horizon_m: float | None = None, decision_interval_steps: int = 1,
+                 heading_hold: HeadingHold | None = None):
         self.action_mode = action_mode
         self.policy = policy
         # the policy decides every this many control steps and its action is held between (as it
@@ -241,6 +259,9 @@ class PolicyController:
         self.decision_interval_steps = max(1, int(decision_interval_steps))
         self._held: np.ndarray | None = None
         self._steps = 0
+        # with a heading hold the policy chooses the gait and the hold the turn, every control step
+        # (as it trained: hexbench.agents.heading.HeadingTurn)
+        self.heading_hold = heading_hold
         # On a course longer than the training goal distance, the target the policy sees is held at
         # most this far ahead of the base (a waypoint on the way to the goal), as in training.
         self.target_horizon_m = target_horizon_m
@@ -256,8 +277,12 @@ class PolicyController:
             if self._steps % self.decision_interval_steps == 0 or self._held is None:
                 self._held = self._decide(obs)
             self._steps += 1
-            return self._held.copy()
-        return self._decide(obs)
+            action = self._held.copy()
+        else:
+            action = self._decide(obs)
+        if self.heading_hold is not None:
+            return with_held_heading(action, self.heading_hold, obs, self.action_mode)
+        return action
 
     def _decide(self, obs: np.ndarray) -> np.ndarray:
         if self.target_horizon_m is not None:
@@ -382,4 +407,4 @@ def make_policy_controller(config, checkpoints_dir: Path, method: str, task,
     path, entry = shipped_checkpoint(checkpoints_dir, method, terrain)
     policy = load_policy(config, path, entry["sha256"])
     return PolicyController(config.action_mode, policy, entry["sha256"], path, waypoint_horizon_m(task.goal_distance_m),
-                            getattr(config, "decision_interval_steps", 1))
+                            getattr(config, "decision_interval_steps", 1), heading_hold(config))

@@ -26,6 +26,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from hexbench.agents.heading import HeadingTurn
 from hexbench.agents.policy import (
     ACTING_PREFIXES,
     EXPLORATION_KEYS,
@@ -65,7 +66,10 @@ def curriculum_env(config, terrain: str, protocol: str = "v1") -> gym.Env:
     if getattr(config, "arrival_bonus", False):
         kwargs["arrival_bonus"] = True
     register_envs(protocol)
-    return ScaledObservation(gym.make(curriculum_id(terrain, config.action_mode, protocol), **kwargs))
+    env = gym.make(curriculum_id(terrain, config.action_mode, protocol), **kwargs)
+    if getattr(config, "heading_hold", False):  # the policy chooses the gait, the heading law the turn
+        env = HeadingTurn(env)
+    return ScaledObservation(env)
 
 
 def load_sb3(method: str, terrain: str, env: gym.Env | None = None, *, checkpoints_dir: Path = SHIPPED_DIR,

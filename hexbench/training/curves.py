@@ -115,6 +115,8 @@ def recipe_description(run: dict) -> str:
         label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
     if cfg.get("arrival_bonus"):
         label += ", arrival bonus"
+    if cfg.get("heading_hold"):
+        label += ", turn from a heading hold"
     if not cfg.get("early_end_penalty", False):
         label += ", no early-end penalty"  # the reward of Table 1 as written (docs/training.md)
     return label

@@ -75,14 +75,15 @@ def _run_config(run: dict):
 def play_episode(policy, config, terrain: str, level: float, seed: int) -> EpisodeOutcome:
     """One deterministic episode of `policy` under the protocol's rules at (terrain, level), through the
     one episode loop (hexbench.suite.rollout)."""
-    from hexbench.agents.policy import PolicyController
+    from hexbench.agents.policy import PolicyController, heading_hold
     from hexbench.suite.rollout import LocalActor, play
     from hexbench.suite.tasks import load_suite
 
     suite = load_suite()
     task = suite.task(terrain, level)
     actor = LocalActor(PolicyController(config.action_mode, policy,
-                                        decision_interval_steps=getattr(config, "decision_interval_steps", 1)))
+                                        decision_interval_steps=getattr(config, "decision_interval_steps", 1),
+                                        heading_hold=heading_hold(config)))
     row = play(task, seed, actor, where="policy", residual_scale=config.residual_scale).row
     return EpisodeOutcome(row["success"], float(row["progress_m"]), row["end_reason"])
 
