@@ -13,7 +13,7 @@ from leaderboard_records import demo_records, synthetic_record, write_board
 
 from hexbench import leaderboard as lb
 from hexbench.leaderboard import seeds as seed_runs
-from hexbench.leaderboard import statistics
+from hexbench.leaderboard import seeds_page, statistics
 from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
@@ -70,6 +70,22 @@ def test_seed_runs_aggregate_into_iqm_rows_with_intervals_and_improvement(repo_l
     assert set(found) == {"ppo"}  # every other method on that terrain; the strong one is clearly better
     assert found["ppo"].value > 0.9 and found["ppo"].low > 0.5
     assert "X better" in text
+
+
+def test_every_untrained_reference_gets_its_row_and_a_line_style_of_its_own(repo_like):
+    board, _ = repo_like
+    write_board(board, [synthetic_record("cpg_heading", {"rough": 11.0, "slopes": 16.0, "stairs": 6.5}, seed=6)])
+    result = lb.build(board)
+    assert not result.errors
+    text = (board / "seeds" / "README.md").read_text()
+    assert "| cpg (no training) | 1 (one record) |" in text and "| cpg_heading (no training) | 1 (one record) |" in text
+    assert "`cpg`, `cpg_heading`" in text  # the page says which records are its references
+    better_than = [line for line in text.splitlines() if line.startswith("| X = ppo_cpg")]
+    assert any("| cpg_heading (no training) |" in line for line in better_than)
+    svg = (board / "seeds" / "rough.svg").read_text()
+    dashes = {style[1] for style in seeds_page.REFERENCE_STYLES}
+    greys = {style[0] for style in seeds_page.REFERENCE_STYLES}
+    assert len(dashes) == len(greys) == 2 and all(g in svg for g in greys)
 
 
 def test_build_of_seed_runs_is_deterministic(repo_like, tmp_path):

@@ -44,7 +44,9 @@ from hexbench.leaderboard.records import RecordError, Row, measured_row, read_re
 from hexbench.suite.tasks import DEFAULT_PROTOCOL, Suite, format_level
 
 SEEDS_DIR = Path("baselines") / "seeds"  # under the repository root
-REFERENCE_METHODS = ("cpg",)  # untrained controllers compared through their full-run record
+# untrained controllers compared through their full-run record: the open-loop CPG (baselines/cpg.py) and
+# the CPG held on its heading (baselines/cpg_heading.py), the start of HRL-hold and HLTA's low level
+REFERENCE_METHODS = ("cpg", "cpg_heading")
 IMPROVEMENT_OF = "ppo_cpg"  # the method whose P(improvement) over every other one is reported
 BOOTSTRAP_SEED = 20211206  # the generator of every bootstrap interval (rliable's NeurIPS 2021 date)
 _FOLDER = re.compile(r"^(?P<method>[A-Za-z0-9_.]+)-(?P<terrain>[a-z]+)-seed(?P<seed>\d+)$")
