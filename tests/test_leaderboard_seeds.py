@@ -66,6 +66,9 @@ def test_seed_runs_aggregate_into_iqm_rows_with_intervals_and_improvement(repo_l
     assert ppo_cpg.all_levels.value == pytest.approx(statistics.interquartile_mean(ppo_cpg.scores))
     assert ppo_cpg.all_levels.low <= ppo_cpg.all_levels.value <= ppo_cpg.all_levels.high
     assert ppo_cpg.all_levels.low < ppo_cpg.all_levels.high and ppo_cpg.all_levels.n_runs == 4
+    headroom = [r.row.terrain("rough")["headroom_auc"] for r in ppo_cpg.runs]
+    assert ppo_cpg.headroom_auc.value == pytest.approx(statistics.interquartile_mean(np.array([headroom]).T))
+    assert "Headroom AUC, IQM (95% CI)" in text
     found = {i.other.label: i.estimate for i in seed_runs.improvements(aggregates)}
     assert set(found) == {"ppo"}  # every other method on that terrain; the strong one is clearly better
     assert found["ppo"].value > 0.9 and found["ppo"].low > 0.5

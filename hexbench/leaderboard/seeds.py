@@ -95,6 +95,7 @@ class TerrainAggregate:
     per_level: tuple[statistics.Estimate, ...]
     all_levels: statistics.Estimate
     auc: statistics.Estimate
+    headroom_auc: statistics.Estimate | None  # over the headroom levels beyond the paper's; None: no such levels
 
     @property
     def seeds(self) -> list[int]:
@@ -244,11 +245,13 @@ def aggregate(runs: list[SeedRun], suite: Suite) -> list[TerrainAggregate]:
         levels = tuple(suite.levels(terrain, include_headroom=False))
         scores = np.array([r.scores(list(levels)) for r in members])
         aucs = np.array([[r.row.terrain(terrain)["auc"]] for r in members])
+        headroom = [r.row.terrain(terrain).get("headroom_auc") for r in members]
         rng = bootstrap_generator(terrain, method)
         out.append(TerrainAggregate(
             method=method, terrain=terrain, runs=members, levels=levels, scores=scores,
             per_level=tuple(statistics.iqm(scores[:, [i]], rng) for i in range(len(levels))),
-            all_levels=statistics.iqm(scores, rng), auc=statistics.iqm(aucs, rng)))
+            all_levels=statistics.iqm(scores, rng), auc=statistics.iqm(aucs, rng),
+            headroom_auc=(None if None in headroom else statistics.iqm(np.array([[v] for v in headroom]), rng))))
     return out
 
 

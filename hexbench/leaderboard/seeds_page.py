@@ -97,12 +97,13 @@ def figure_svg(aggregates: list[seed_runs.TerrainAggregate], terrain: str, suite
 
 def _methods_table(shown: list[seed_runs.TerrainAggregate], unit: str) -> str:
     levels = shown[0].levels
-    header = ["Method", "Runs (seeds)", "AUC, IQM (95% CI)", "Success over the paper levels, IQM (95% CI)"] + [
-        format_level(v) + f" {unit}" for v in levels]
+    header = ["Method", "Runs (seeds)", "AUC, IQM (95% CI)", "Headroom AUC, IQM (95% CI)",
+              "Success over the paper levels, IQM (95% CI)"] + [format_level(v) + f" {unit}" for v in levels]
     rows = []
     for a in shown:
         seeds = ", ".join(str(s) for s in a.seeds) if a.seeds else "one record"
         rows.append([md_text(a.method.name), f"{len(a.runs)} ({seeds})", fmt_estimate(a.auc),
+                     "–" if a.headroom_auc is None else fmt_estimate(a.headroom_auc),
                      fmt_estimate(a.all_levels, percent=True)] + [fmt_estimate(e, percent=True) for e in a.per_level])
     return md_table(header, rows)
 
@@ -152,7 +153,8 @@ def render_seeds_page(aggregates: list[seed_runs.TerrainAggregate], found: list[
            f"({DEFAULT_RESAMPLES} resamples, generator seed {seed_runs.BOOTSTRAP_SEED}), performance profiles "
            "over the run x level success rates, and the probability of improvement P(X > Y) (Mann-Whitney, "
            "averaged over levels). Scores are success rates at the paper's levels (headroom levels left out, as "
-           "in the AUC). With fewer than 4 runs the IQM is close to the mean and the interval is wide: read "
+           "in the AUC); the headroom AUC, the same area over the levels beyond the paper's, tells apart "
+           "methods that every paper level saturates (slopes). With fewer than 4 runs the IQM is close to the mean and the interval is wide: read "
            "both with the number of runs beside them.\n"]
     if not any(_trained_on(aggregates, t) for t in suite.terrains):
         out.append("No seed runs yet.\n")
