@@ -154,8 +154,8 @@ def render_seeds_page(aggregates: list[seed_runs.TerrainAggregate], found: list[
            "over the run x level success rates, and the probability of improvement P(X > Y) (Mann-Whitney, "
            "averaged over levels). Scores are success rates at the paper's levels (headroom levels left out, as "
            "in the AUC); the headroom AUC, the same area over the levels beyond the paper's, tells apart "
-           "methods that every paper level saturates (slopes). With fewer than 4 runs the IQM is close to the mean and the interval is wide: read "
-           "both with the number of runs beside them.\n"]
+           "methods that every paper level saturates (slopes). With fewer than 4 runs the IQM is close to the "
+           "mean and the interval is wide: read both with the number of runs beside them.\n"]
     if not any(_trained_on(aggregates, t) for t in suite.terrains):
         out.append("No seed runs yet.\n")
     for terrain in suite.terrains:
