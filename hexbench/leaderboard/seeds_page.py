@@ -46,7 +46,7 @@ def _styles(aggregates: list[seed_runs.TerrainAggregate]) -> dict[seed_runs.Meth
     trained = [m for m in methods if m.budget_env_steps is not None]
     styles = {m: (MEASURED_COLORS[i % len(MEASURED_COLORS)], "-") for i, m in enumerate(trained)}
     references = sorted((m for m in methods if m.budget_env_steps is None),
-                        key=lambda m: (seed_runs.REFERENCE_METHODS + (m.label,)).index(m.label))
+                        key=lambda m: seed_runs.REFERENCE_METHODS.index(m.label))
     styles.update({m: REFERENCE_STYLES[i % len(REFERENCE_STYLES)] for i, m in enumerate(references)})
     return styles
 
