@@ -58,3 +58,36 @@ def test_an_arrival_earns_the_discounted_most_that_staying_near_the_goal_could()
     penalised, _ = _first_end(True, max_lateral_deviation_m=0.002)
     assert both == penalised
     assert isinstance(with_end_terms(HexapodEnv(EnvConfig(terrain="rough")), True, True), ArrivalBonus)
+
+
+def test_per_decision_end_terms_bound_a_discount_per_decision():
+    # an agent deciding every K control steps collects K steps' rewards per discount, so staying near
+    # the goal is worth up to K times the per-step bound: the terms scale with K
+    w = TABLE1_WEIGHTS["stairs"]
+    assert arrival_bonus(w, control_steps_per_discount=30) == pytest.approx(30 * arrival_bonus(w))
+    assert early_end_penalty(w, control_steps_per_discount=30) == pytest.approx(30 * early_end_penalty(w))
+    staying = sum(0.99**j * 30 * (w.distance * 9.0 + w.heading + w.tilt) for j in range(10_000))
+    assert arrival_bonus(w, control_steps_per_discount=30) >= staying > arrival_bonus(w)
+
+
+def test_per_decision_end_terms_pay_k_times_the_bonus_on_an_arrival():
+    from hexbench.training.wrappers import DecisionInterval, make_curriculum_env
+
+    def arrival_reward(control_steps_per_discount: int) -> float:
+        env = make_curriculum_env("rough", "cpg_residual", arrival_bonus=True, goal_distance_m=0.05,
+                                  control_steps_per_discount=control_steps_per_discount)
+        env = DecisionInterval(env, 30)
+        env.reset(seed=5)
+        try:
+            for _ in range(20):
+                _, reward, terminated, truncated, info = env.step(np.zeros(18, np.float32))
+                if terminated or truncated:
+                    assert info["end_reason"] == "success"
+                    return reward
+        finally:
+            env.close()
+        raise AssertionError("episode did not end")
+
+    w = TABLE1_WEIGHTS["rough"]
+    delta = difficulty_factor("rough", 5.0)  # the curriculum's first level
+    assert arrival_reward(30) - arrival_reward(1) == pytest.approx((1 + delta) * 29 * arrival_bonus(w))

@@ -16,6 +16,8 @@ Every config has these fields, read here and by hexbench.training (settings, env
                    action is held between, in training and in evaluation (hexbench.training.wrappers)
     early_end_penalty, arrival_bonus (optional, default False) training reward terms for how an
                    episode ends (hexbench.training.wrappers)
+    end_terms_per_decision (optional, default False) those terms sized for a discount per decision
+                   of decision_interval_steps control steps (hexbench.training.wrappers)
     heading_hold   (optional, default False; steering action modes) the turn is not learned: a fixed
                    heading law (hexbench.agents.heading.HeadingHold) sets it every control step, in
                    training and in evaluation, and the policy chooses the four gait values alone
@@ -53,7 +55,7 @@ ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
 NON_SB3_FIELDS: frozenset[str] = frozenset({"algo", "action_mode", "net_arch", "activation", "residual_scale",
                                            "log_std_init", "action_noise_std", "early_end_penalty", "arrival_bonus",
                                            "normalize_reward", "initial_action", "decision_interval_steps",
-                                           "critic_net_arch", "heading_hold"})
+                                           "critic_net_arch", "heading_hold", "end_terms_per_decision"})
 
 # Fixed observation scaling (stateless, so a checkpoint is the network alone): joint velocities
 # [rad/s] are divided by 5 to bring them to O(1) like the other groups (positions [rad], torques

@@ -115,6 +115,8 @@ def recipe_description(run: dict) -> str:
         label += f", curriculum {c['start_level']:g}:{c['level_step']:g}:{c['max_level']:g}"
     if cfg.get("arrival_bonus"):
         label += ", arrival bonus"
+    if cfg.get("end_terms_per_decision") and (cfg.get("decision_interval_steps") or 1) != 1:
+        label += " (end terms per decision)"
     if cfg.get("heading_hold"):
         label += ", turn from a heading hold"
     if not cfg.get("early_end_penalty", False):

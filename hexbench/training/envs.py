@@ -59,21 +59,25 @@ class TrainingWrapper(ScaledObservation):
 def make_training_env(terrain: str, action_mode: str, residual_scale: float | None,
                       fixed_level: float | None = None, early_end_penalty: bool = False,
                       curriculum: Curriculum | None = None, decision_interval_steps: int = 1,
-                      arrival_bonus: bool = False, heading_hold: bool = False) -> gym.Env:
+                      arrival_bonus: bool = False, heading_hold: bool = False,
+                      end_terms_per_decision: bool = False) -> gym.Env:
     """The curriculum env of paper 4.1 (or another curriculum, or with fixed_level that level alone),
     noise on, with the early-end penalty and the arrival bonus if asked, monitored (episode returns with
     those terms and lengths in control steps), with actions held for `decision_interval_steps` control steps;
-    with `heading_hold` the turn of a steering mode is set by the heading law (HeadingTurn) every control step."""
+    with `heading_hold` the turn of a steering mode is set by the heading law (HeadingTurn) every control step.
+    With `end_terms_per_decision` the end terms bound a discount per decision, not per control step
+    (hexbench.training.wrappers)."""
     from stable_baselines3.common.monitor import Monitor
 
+    control_steps_per_discount = decision_interval_steps if end_terms_per_decision else 1
     if fixed_level is None:
         env = make_curriculum_env(terrain, action_mode, residual_scale=residual_scale,
                                   early_end_penalty=early_end_penalty, arrival_bonus=arrival_bonus,
-                                  curriculum=curriculum)
+                                  curriculum=curriculum, control_steps_per_discount=control_steps_per_discount)
     else:
         env = HexapodEnv(EnvConfig(terrain=terrain, level=fixed_level, action_mode=action_mode,
                                    residual_scale=residual_scale))
-        env = with_end_terms(env, early_end_penalty, arrival_bonus)
+        env = with_end_terms(env, early_end_penalty, arrival_bonus, control_steps_per_discount)
     if heading_hold:
         env = HeadingTurn(env)
     env = Monitor(env)
@@ -85,12 +89,14 @@ def make_training_env(terrain: str, action_mode: str, residual_scale: float | No
 def make_vec_env(terrain: str, action_mode: str, workers: int, residual_scale: float | None = None,
                  fixed_level: float | None = None, early_end_penalty: bool = False,
                  normalize_reward_gamma: float | None = None, curriculum: Curriculum | None = None,
-                 decision_interval_steps: int = 1, arrival_bonus: bool = False, heading_hold: bool = False):
+                 decision_interval_steps: int = 1, arrival_bonus: bool = False, heading_hold: bool = False,
+                 end_terms_per_decision: bool = False):
     """The workers' envs as one VecEnv; with normalize_reward_gamma, rewards are normalised (VecNormalize)."""
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecNormalize
 
     factories = [partial(make_training_env, terrain, action_mode, residual_scale, fixed_level, early_end_penalty,
-                         curriculum, decision_interval_steps, arrival_bonus, heading_hold) for _ in range(workers)]
+                         curriculum, decision_interval_steps, arrival_bonus, heading_hold, end_terms_per_decision)
+                 for _ in range(workers)]
     venv = DummyVecEnv(factories) if workers == 1 else SubprocVecEnv(factories, start_method="fork")
     if normalize_reward_gamma is None:
         return venv
@@ -103,7 +109,7 @@ def make_run_vec_env(settings, config):
                         settings.fixed_level, getattr(config, "early_end_penalty", False),
                         config.gamma if getattr(config, "normalize_reward", False) else None, settings.curriculum,
                         getattr(config, "decision_interval_steps", 1), getattr(config, "arrival_bonus", False),
-                        getattr(config, "heading_hold", False))
+                        getattr(config, "heading_hold", False), getattr(config, "end_terms_per_decision", False))
 
 
 def reward_normalizer_state(venv) -> dict | None:
