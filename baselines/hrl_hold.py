@@ -16,7 +16,10 @@ the first difference alone, baselines/hrl_steer.py learns the turn instead):
   some seeds only (baselines/seeds/README.md);
 - the policy decides every 30 control steps (0.5 s, a quarter of the CPG's 2 s gait cycle) and
   the CPG keeps its parameters in between; a rollout is 512 decisions;
-- the arrival bonus (hexbench.training.wrappers), as baselines/hrl_steer.py;
+- the arrival bonus (hexbench.training.wrappers), as baselines/hrl_steer.py; it and the early-end
+  penalty are sized for a discount per 30-step decision (end_terms_per_decision, since 2026-12-04).
+  Sized per control step, as before, both were 30 times too small, and the policies learned to stop
+  0.1-0.3 m short of the goal after 375k-500k env steps while their training return kept rising;
 - as baselines/hrl.py: the mean action starts at the CPG's gait (here exactly, to float32), initial
   std 0.37, the early-end penalty and normalised rewards.
 Checkpoint selection: held-out episodes (hexbench checkpoints select), as every baseline.
@@ -54,6 +57,7 @@ class Config:
     # the CPG's own gait (paper 2.2), inside this mode's ranges (those of cpg_params_wide); the turn is the hold's
     initial_action: tuple[float, ...] = cpg_params_action(math.pi, 0.45, 1.2, 1.0, "cpg_params_wide")
     decision_interval_steps: int = 30  # the CPG keeps its parameters for 30 control steps (0.5 s)
+    end_terms_per_decision: bool = True  # not in the paper: the end terms bound a discount per decision
 
 
 CONFIG = Config()
