@@ -19,7 +19,7 @@ the first difference alone, baselines/hrl_steer.py learns the turn instead):
 - the arrival bonus (hexbench.training.wrappers), as baselines/hrl_steer.py; it and the early-end
   penalty are sized for a discount per 30-step decision (end_terms_per_decision, since 2026-12-04).
   Sized per control step, as before, both were 30 times too small, and the policies learned to stop
-  0.1-0.3 m short of the goal after 375k-500k env steps while their training return kept rising;
+  0.1-0.5 m short of the goal after 375k-500k env steps while their training return kept rising;
 - as baselines/hrl.py: the mean action starts at the CPG's gait (here exactly, to float32), initial
   std 0.37, the early-end penalty and normalised rewards.
 Checkpoint selection: held-out episodes (hexbench checkpoints select), as every baseline.
