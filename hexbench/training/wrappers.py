@@ -23,7 +23,7 @@
   Both bounds assume the agent discounts by gamma per control step. A policy that decides every K
   control steps (DecisionInterval) is discounted per decision and is paid the sum of K control
   steps' rewards per decision, so staying near the goal is worth up to K times more than the bonus
-  pays: HRL-hold (K = 30) learned to stop 0.1-0.3 m short of the goal while its training return
+  pays: HRL-hold (K = 30) learned to stop 0.1-0.5 m short of the goal while its training return
   kept rising. With the config option `end_terms_per_decision` both terms are K times larger, the
   bound for a discount per decision.
 
