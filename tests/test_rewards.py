@@ -5,23 +5,33 @@ goal never pays more than arriving."""
 import numpy as np
 import pytest
 
-from hexbench.training.wrappers import ArrivalBonus, arrival_bonus, early_end_penalty, with_end_terms
+from hexbench.training.wrappers import (
+    ArrivalBonus,
+    DecisionInterval,
+    arrival_bonus,
+    early_end_penalty,
+    make_curriculum_env,
+    with_end_terms,
+)
 from hexbench.world.env import EnvConfig, HexapodEnv
 from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor
 
 
-def _first_end(penalty: bool, bonus: bool = False, **rules):
-    env = HexapodEnv(EnvConfig(terrain="rough", level=7, **rules))
-    env = with_end_terms(env, penalty, bonus)
+def _play_to_end(env, steps: int = 600) -> tuple[float, str]:
+    """(the last step's reward, the end reason) of an episode of zero actions on seed 5."""
     env.reset(seed=5)
     try:
-        for _ in range(600):
+        for _ in range(steps):
             _, reward, terminated, truncated, info = env.step(np.zeros(18, np.float32))
             if terminated or truncated:
                 return reward, info["end_reason"]
     finally:
         env.close()
     raise AssertionError("episode did not end")
+
+
+def _first_end(penalty: bool, bonus: bool = False, **rules):
+    return _play_to_end(with_end_terms(HexapodEnv(EnvConfig(terrain="rough", level=7, **rules)), penalty, bonus))
 
 
 def test_leaving_the_corridor_costs_the_discounted_worst_case_of_staying():
@@ -71,22 +81,12 @@ def test_per_decision_end_terms_bound_a_discount_per_decision():
 
 
 def test_per_decision_end_terms_pay_k_times_the_bonus_on_an_arrival():
-    from hexbench.training.wrappers import DecisionInterval, make_curriculum_env
-
     def arrival_reward(control_steps_per_discount: int) -> float:
         env = make_curriculum_env("rough", "cpg_residual", arrival_bonus=True, goal_distance_m=0.05,
                                   control_steps_per_discount=control_steps_per_discount)
-        env = DecisionInterval(env, 30)
-        env.reset(seed=5)
-        try:
-            for _ in range(20):
-                _, reward, terminated, truncated, info = env.step(np.zeros(18, np.float32))
-                if terminated or truncated:
-                    assert info["end_reason"] == "success"
-                    return reward
-        finally:
-            env.close()
-        raise AssertionError("episode did not end")
+        reward, end_reason = _play_to_end(DecisionInterval(env, 30), steps=20)
+        assert end_reason == "success"
+        return reward
 
     w = TABLE1_WEIGHTS["rough"]
     delta = difficulty_factor("rough", 5.0)  # the curriculum's first level

@@ -170,9 +170,9 @@ def with_end_terms(env: gym.Env, early_end_penalty: bool, arrival_bonus: bool,
                    control_steps_per_discount: int = 1) -> gym.Env:
     """`env` with the training reward options that price an episode's end, for an agent that
     discounts once every `control_steps_per_discount` control steps."""
-    steps = control_steps_per_discount
-    env = EarlyEndPenalty(env, control_steps_per_discount=steps) if early_end_penalty else env
-    return ArrivalBonus(env, control_steps_per_discount=steps) if arrival_bonus else env
+    if early_end_penalty:
+        env = EarlyEndPenalty(env, control_steps_per_discount=control_steps_per_discount)
+    return ArrivalBonus(env, control_steps_per_discount=control_steps_per_discount) if arrival_bonus else env
 
 
 def make_curriculum_env(terrain: str, action_mode: str = "cpg_residual", *, residual_scale: float | None = None,
