@@ -5,9 +5,9 @@ goal never pays more than arriving."""
 import numpy as np
 import pytest
 
+from hexbench.agents.decision import DecisionInterval
 from hexbench.training.wrappers import (
     ArrivalBonus,
-    DecisionInterval,
     arrival_bonus,
     early_end_penalty,
     make_curriculum_env,

@@ -63,3 +63,44 @@ def test_the_rl_zoo3_hyperparameters_are_the_ppo_cpg_config():
         assert eval(entry["normalize"]) == {"norm_obs": False, "norm_reward": config.normalize_reward,  # noqa: S307
                                             "gamma": config.gamma}
     assert not config.use_sde  # the zoo file states the paper's Gaussian exploration
+
+
+def _end_rewards(env) -> list[tuple[str, float]]:
+    """(wrapper name, reward before delta) of every end term in the wrapper chain."""
+    import gymnasium as gym
+
+    out = []
+    while isinstance(env, gym.Wrapper):
+        if hasattr(env, "_end_reward"):
+            out.append((type(env).__name__, env._end_reward))
+        env = env.env
+    return out
+
+
+@pytest.mark.parametrize("method", ["hrl_steer", "hrl_hold"])
+def test_the_sb3_env_of_a_decision_interval_recipe_steps_as_training_does(method):
+    """One step of `curriculum_env` is one decision of `hexbench train`'s env for the same CONFIG:
+    same observations, rewards and ends for the same seed and actions, the same end terms."""
+    from hexbench.agents.sb3 import curriculum_env
+    from hexbench.training.envs import make_training_env
+
+    config = load_controller_module(REPO / "baselines" / f"{method}.py").CONFIG
+    sb3_env = curriculum_env(config, "rough")
+    train_env = make_training_env("rough", config.action_mode, None, early_end_penalty=config.early_end_penalty,
+                                  decision_interval_steps=config.decision_interval_steps,
+                                  arrival_bonus=config.arrival_bonus, heading_hold=getattr(config, "heading_hold", False),
+                                  end_terms_per_decision=getattr(config, "end_terms_per_decision", False))
+    assert sb3_env.action_space == train_env.action_space
+    assert _end_rewards(sb3_env) == _end_rewards(train_env) != []
+    obs_a, _ = sb3_env.reset(seed=3)
+    obs_b, _ = train_env.reset(seed=3)
+    assert np.array_equal(obs_a, obs_b)
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        action = rng.uniform(-1.0, 1.0, sb3_env.action_space.shape).astype(np.float32)
+        obs_a, reward_a, *ends_a, info_a = sb3_env.step(action)
+        obs_b, reward_b, *ends_b, info_b = train_env.step(action)
+        assert info_a["decision_env_steps"] == config.decision_interval_steps == info_b["decision_env_steps"]
+        assert np.array_equal(obs_a, obs_b) and reward_a == reward_b and ends_a == ends_b
+    sb3_env.close()
+    train_env.close()

@@ -16,7 +16,8 @@ The networks see observations scaled by `hexbench.agents.policy.OBS_SCALE` (join
 `ScaledObservation` is that scaling as a Gymnasium wrapper, for any hexbench env (rl-zoo3:
 `env_wrapper: hexbench.agents.sb3.ScaledObservation`). The env `load_sb3` returns is the
 terrain's training curriculum (`hexbench/<Terrain>-Curriculum-<Mode>-v1`) with the CONFIG's
-residual scale and early-end penalty, so wrapped.
+residual scale, end terms, heading hold and decision interval, so wrapped: one step of it is one
+step of `hexbench train`'s env for that CONFIG.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
+from hexbench.agents.decision import DecisionInterval
 from hexbench.agents.heading import HeadingTurn
 from hexbench.agents.policy import (
     ACTING_PREFIXES,
@@ -59,16 +61,24 @@ class ScaledObservation(gym.ObservationWrapper):
 
 
 def curriculum_env(config, terrain: str, protocol: str = "v1") -> gym.Env:
-    """The terrain's registered training curriculum for the config's action mode, observation-scaled."""
+    """The terrain's registered training curriculum for the config's action mode, observation-scaled,
+    stepped as `hexbench train` steps it: the config's residual scale and end terms (per decision
+    with `end_terms_per_decision`), the heading law setting the turn every control step with
+    `heading_hold`, and one step per decision with `decision_interval_steps`."""
     kwargs = {"residual_scale": config.residual_scale} if config.action_mode == "cpg_residual" else {}
     if getattr(config, "early_end_penalty", False):
         kwargs["early_end_penalty"] = True
     if getattr(config, "arrival_bonus", False):
         kwargs["arrival_bonus"] = True
+    interval = getattr(config, "decision_interval_steps", 1)
+    if getattr(config, "end_terms_per_decision", False):
+        kwargs["control_steps_per_discount"] = interval
     register_envs(protocol)
     env = gym.make(curriculum_id(terrain, config.action_mode, protocol), **kwargs)
     if getattr(config, "heading_hold", False):  # the policy chooses the gait, the heading law the turn
         env = HeadingTurn(env)
+    if interval != 1:
+        env = DecisionInterval(env, interval)
     return ScaledObservation(env)
 
 

@@ -20,15 +20,10 @@ from functools import partial
 import gymnasium as gym
 import numpy as np
 
+from hexbench.agents.decision import DecisionInterval
 from hexbench.agents.heading import HeadingTurn
 from hexbench.agents.sb3 import ScaledObservation
-from hexbench.training.wrappers import (
-    Curriculum,
-    CurriculumWrapper,
-    DecisionInterval,
-    make_curriculum_env,
-    with_end_terms,
-)
+from hexbench.training.wrappers import Curriculum, CurriculumWrapper, make_curriculum_env, with_end_terms
 from hexbench.world.env import EnvConfig, HexapodEnv
 
 

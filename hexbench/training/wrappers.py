@@ -28,12 +28,8 @@
   bound for a discount per decision.
 
   DecisionInterval    the config option `decision_interval_steps` (not in the paper): the policy
-                      decides every K control steps and its action is held for K steps (summed
-                      reward, the last step's observation and info; `info["decision_env_steps"]`
-                      says how many control steps the decision took). For HRL: a policy asked
-                      for CPG parameters every 1/60 s learns to switch them bang-bang (the shipped
-                      HRL v4's hip amplitude A1 moves by 0.48 of its [-1, 1] range per control
-                      step on stairs 2 cm), which no longer makes the CPG's gait.
+                      decides every K control steps: hexbench.agents.decision, since the SB3 env of a
+                      shipped baseline (hexbench.agents.sb3) wraps with it too.
 
 `make_curriculum_env` is the entry point of the registered ids hexbench/<Terrain>-Curriculum-<Mode>-v1
 (hexbench.suite.tasks registers them by entry-point string).
@@ -193,22 +189,3 @@ def make_curriculum_env(terrain: str, action_mode: str = "cpg_residual", *, resi
     return with_end_terms(env, early_end_penalty, arrival_bonus, control_steps_per_discount)
 
 
-class DecisionInterval(gym.Wrapper):
-    """One step = the action held for `steps` control steps (fewer if the episode ends first)."""
-
-    def __init__(self, env: gym.Env, steps: int):
-        if steps < 1:
-            raise ValueError(f"decision interval must be >= 1 control step (got {steps})")
-        super().__init__(env)
-        self.steps = int(steps)
-
-    def step(self, action):
-        total = 0.0
-        for taken in range(1, self.steps + 1):
-            obs, reward, terminated, truncated, info = self.env.step(action)
-            total += float(reward)
-            if terminated or truncated:
-                break
-        info = dict(info)
-        info["decision_env_steps"] = taken
-        return obs, total, terminated, truncated, info
