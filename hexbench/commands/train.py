@@ -76,6 +76,46 @@ def register(app: typer.Typer) -> None:
             err.print(f"done: {run['env_steps']} env steps, {run['wall_time_s']:.0f} s; "
                       f"last checkpoint {settings.run_dir / last['file']}", highlight=False, soft_wrap=True)
 
+    @app.command("seed-run")
+    def seed_run_command(
+        file: Path = typer.Argument(..., help="baseline file with a CONFIG dataclass, e.g. baselines/sac.py"),
+        terrain: str = typer.Option(..., "--terrain", help="rough, slopes or stairs"),
+        seed: int = typer.Option(..., "--seed", help="seed of the learner and the environments (>= 0)"),
+        steps: int = typer.Option(1_000_000, "--steps", help="env-step budget (every method's on the seeds page: 1M)"),
+        workers: int = typer.Option(1, "--workers", min=1, help="processes for held-out, protocol and replayed "
+                                    "episodes (training itself steps one environment)"),
+        sample: int = typer.Option(40, "--sample", min=0, help="episodes replayed from their action logs before "
+                                   "the record is admitted (0: every one)"),
+        seeds_dir: Path = typer.Option(Path("baselines/seeds"), "--seeds-dir", help="where the seed-run folder goes"),
+        training_dir: Path = typer.Option(Path("training"), "--training-dir", help="where the training run goes"),
+        scoring_dir: Path = typer.Option(Path("runs/seed-runs"), "--scoring-dir", help="where the scored copy and "
+                                         "the protocol episodes' action logs go"),
+        progress: bool = typer.Option(True, "--progress/--no-progress", help="show progress bars"),
+    ) -> None:
+        """Train one seed of a baseline's recipe from scratch, select, score and admit it: baselines/seeds/<method>-<terrain>-seed<S>/."""
+        from rich.console import Console
+
+        from hexbench.errors import HexbenchError
+        from hexbench.leaderboard.seed_pipeline import SeedRunPlan, make_seed_run
+
+        err = Console(stderr=True, soft_wrap=True, highlight=False)
+        plan = SeedRunPlan(baseline_path=file, terrain=terrain, seed=seed, budget_env_steps=steps,
+                           training_root=training_dir, scoring_root=scoring_dir, seeds_dir=seeds_dir, workers=workers,
+                           replay_sample=sample or None, show_progress=progress)
+        command = ["hexbench", "seed-run", str(file), "--terrain", terrain, "--seed", str(seed)]
+        for flag, value, default in (("--steps", steps, 1_000_000), ("--workers", workers, 1), ("--sample", sample, 40),
+                                     ("--seeds-dir", seeds_dir, Path("baselines/seeds")),
+                                     ("--training-dir", training_dir, Path("training")),
+                                     ("--scoring-dir", scoring_dir, Path("runs/seed-runs"))):
+            if value != default:  # the command as it makes this run, whatever the order it was typed in
+                command += [flag, str(value)]
+        try:
+            folder = make_seed_run(plan, shlex.join(command), say=err.print)
+        except HexbenchError as e:
+            typer.secho(f"error: {e}", fg="red", err=True)
+            raise typer.Exit(2) from None
+        err.print(f"done: {folder} (run `hexbench leaderboard build` to put it on leaderboard/seeds/)")
+
     def _train_batch(file: Path, terrain: str, seeds: str, out: Path | None, engine: str, address: str | None,
                      parallel: int | None, options: dict, progress: bool) -> None:
         from rich.console import Console
