@@ -62,6 +62,16 @@ def test_a_file_without_a_recipe_is_refused(tmp_path):
     assert written(tmp_path) == ["mine.py"]
 
 
+def test_the_recorded_command_names_the_options_away_from_their_defaults():
+    from hexbench.leaderboard.seed_pipeline import SeedRunPlan
+
+    assert SeedRunPlan(Path("baselines/td3.py"), "rough", 1).command == \
+        "hexbench seed-run baselines/td3.py --terrain rough --seed 1"
+    plan = SeedRunPlan(Path("baselines/td3.py"), "stairs", 2, replay_sample=None, seeds_dir=Path("my seeds"),
+                       budget_env_steps=1_000_000, show_progress=False)
+    assert plan.command == "hexbench seed-run baselines/td3.py --terrain stairs --seed 2 --sample 0 --seeds-dir 'my seeds'"
+
+
 @pytest.mark.slow
 def test_one_command_makes_a_seed_run_folder_that_joins_the_seeds_page(tmp_path):
     """A tiny budget (no update yet: TD3 acts from its fresh actor), the rest as a 1M run: held-out

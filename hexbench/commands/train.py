@@ -81,15 +81,18 @@ def register(app: typer.Typer) -> None:
         file: Path = typer.Argument(..., help="baseline file with a CONFIG dataclass, e.g. baselines/sac.py"),
         terrain: str = typer.Option(..., "--terrain", help="rough, slopes or stairs"),
         seed: int = typer.Option(..., "--seed", help="seed of the learner and the environments (>= 0)"),
-        steps: int = typer.Option(1_000_000, "--steps", help="env-step budget (every method's on the seeds page: 1M)"),
-        workers: int = typer.Option(1, "--workers", min=1, help="processes for held-out, protocol and replayed "
-                                    "episodes (training itself steps one environment)"),
-        sample: int = typer.Option(40, "--sample", min=0, help="episodes replayed from their action logs before "
-                                   "the record is admitted (0: every one)"),
-        seeds_dir: Path = typer.Option(Path("baselines/seeds"), "--seeds-dir", help="where the seed-run folder goes"),
-        training_dir: Path = typer.Option(Path("training"), "--training-dir", help="where the training run goes"),
-        scoring_dir: Path = typer.Option(Path("runs/seed-runs"), "--scoring-dir", help="where the scored copy and "
-                                         "the protocol episodes' action logs go"),
+        steps: int = typer.Option(None, "--steps", min=1, help="env-step budget [default: 1M, every method's on the "
+                                  "seeds page]"),
+        workers: int = typer.Option(None, "--workers", min=1, help="processes for held-out, protocol and replayed "
+                                    "episodes; training steps one environment [default: 1]"),
+        sample: int = typer.Option(None, "--sample", min=0, help="episodes replayed from their action logs before "
+                                   "the record is admitted, 0 for every one [default: 40]"),
+        seeds_dir: Path = typer.Option(None, "--seeds-dir", help="where the seed-run folder goes [default: "
+                                       "baselines/seeds]"),
+        training_dir: Path = typer.Option(None, "--training-dir", help="where the training run goes [default: "
+                                          "training]"),
+        scoring_dir: Path = typer.Option(None, "--scoring-dir", help="where the scored copy and the protocol "
+                                         "episodes' action logs go [default: runs/seed-runs]"),
         progress: bool = typer.Option(True, "--progress/--no-progress", help="show progress bars"),
     ) -> None:
         """Train one seed of a baseline's recipe from scratch, select, score and admit it: baselines/seeds/<method>-<terrain>-seed<S>/."""
@@ -99,18 +102,14 @@ def register(app: typer.Typer) -> None:
         from hexbench.leaderboard.seed_pipeline import SeedRunPlan, make_seed_run
 
         err = Console(stderr=True, soft_wrap=True, highlight=False)
-        plan = SeedRunPlan(baseline_path=file, terrain=terrain, seed=seed, budget_env_steps=steps,
-                           training_root=training_dir, scoring_root=scoring_dir, seeds_dir=seeds_dir, workers=workers,
-                           replay_sample=sample or None, show_progress=progress)
-        command = ["hexbench", "seed-run", str(file), "--terrain", terrain, "--seed", str(seed)]
-        for flag, value, default in (("--steps", steps, 1_000_000), ("--workers", workers, 1), ("--sample", sample, 40),
-                                     ("--seeds-dir", seeds_dir, Path("baselines/seeds")),
-                                     ("--training-dir", training_dir, Path("training")),
-                                     ("--scoring-dir", scoring_dir, Path("runs/seed-runs"))):
-            if value != default:  # the command as it makes this run, whatever the order it was typed in
-                command += [flag, str(value)]
+        given = {"budget_env_steps": steps, "workers": workers, "replay_sample": sample, "seeds_dir": seeds_dir,
+                 "training_root": training_dir, "scoring_root": scoring_dir}
+        options = {name: value for name, value in given.items() if value is not None}
+        if options.get("replay_sample") == 0:
+            options["replay_sample"] = None  # every episode
         try:
-            folder = make_seed_run(plan, shlex.join(command), say=err.print)
+            plan = SeedRunPlan(baseline_path=file, terrain=terrain, seed=seed, show_progress=progress, **options)
+            folder = make_seed_run(plan, say=err.print)
         except HexbenchError as e:
             typer.secho(f"error: {e}", fg="red", err=True)
             raise typer.Exit(2) from None

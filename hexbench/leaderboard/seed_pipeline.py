@@ -25,9 +25,10 @@ from __future__ import annotations
 
 import csv
 import os
+import shlex
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 from hexbench.artifacts.files import make_folder, os_reason
@@ -50,6 +51,11 @@ SCORING_ROOT = Path("runs") / "seed-runs"  # the scoring folders (git-ignored), 
 TRAINING_FILES = ("run.json", "progress.csv", "selection.json")  # what of training/<name>/ the folder keeps
 
 
+# `hexbench seed-run` options that change what a run makes or where it lands, and their plan fields
+COMMAND_OPTIONS = (("--steps", "budget_env_steps"), ("--workers", "workers"), ("--sample", "replay_sample"),
+                   ("--seeds-dir", "seeds_dir"), ("--training-dir", "training_root"), ("--scoring-dir", "scoring_root"))
+
+
 class SeedPipelineError(HexbenchError):
     """A seed run that cannot be made or admitted."""
 
@@ -70,11 +76,22 @@ class SeedRunPlan:
     replay_sample: int | None = REPLAY_SAMPLE  # None: replay every episode
     show_progress: bool = True
 
-    def train_settings(self, command: str) -> TrainSettings:
+    def train_settings(self) -> TrainSettings:
         return TrainSettings(baseline_path=Path(self.baseline_path), terrain=self.terrain,
                              total_steps=self.budget_env_steps, seed=self.seed,
-                             out_dir=self._run_dir(), checkpoint_every_steps=self.checkpoint_every_env_steps,
-                             command=command, show_progress=self.show_progress)
+                             out_dir=self.run_dir, checkpoint_every_steps=self.checkpoint_every_env_steps,
+                             command=self.command, show_progress=self.show_progress)
+
+    @property
+    def command(self) -> str:
+        """The `hexbench seed-run` command that makes this run: the options away from their defaults, in
+        one order (recorded in run.json and the manifest entry)."""
+        parts = ["hexbench", "seed-run", str(self.baseline_path), "--terrain", self.terrain, "--seed", str(self.seed)]
+        for flag, name in COMMAND_OPTIONS:
+            value, default = getattr(self, name), next(f.default for f in fields(self) if f.name == name)
+            if value != default:
+                parts += [flag, "0" if value is None else str(value)]
+        return shlex.join(parts)
 
     @property
     def method(self) -> str:
@@ -84,7 +101,8 @@ class SeedRunPlan:
     def name(self) -> str:
         return f"{self.method}-{self.terrain}-seed{self.seed}"
 
-    def _run_dir(self) -> Path:
+    @property
+    def run_dir(self) -> Path:
         return Path(self.training_root) / self.name
 
     @property
@@ -96,9 +114,9 @@ class SeedRunPlan:
         return Path(self.scoring_root) / self.name
 
 
-def make_seed_run(plan: SeedRunPlan, command: str, say: Callable[[str], None] = lambda _line: None) -> Path:
+def make_seed_run(plan: SeedRunPlan, say: Callable[[str], None] = lambda _line: None) -> Path:
     """Make, score and admit one seed run (module docstring); returns its folder under the seeds folder."""
-    settings = plan.train_settings(command)
+    settings = plan.train_settings()
     _check_plan(plan, settings)
     run_dir = settings.run_dir
     run = read_run(run_dir)
@@ -120,7 +138,7 @@ def make_seed_run(plan: SeedRunPlan, command: str, say: Callable[[str], None] = 
     say(f"4/5 scoring it on every {plan.terrain} level of the protocol, sandboxed")
     tasks = load_suite().select([plan.terrain])
     result = evaluate(controller, tasks, scoring / "run", workers=plan.workers, record=False, label=plan.method,
-                      progress=plan.show_progress, command=command)
+                      progress=plan.show_progress, command=plan.command)
     if result.error:
         raise SeedPipelineError(result.error)
     say(f"5/5 replaying {plan.replay_sample or 'every'} episodes from their action logs and admitting the record")
