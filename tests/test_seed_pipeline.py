@@ -62,6 +62,16 @@ def test_a_file_without_a_recipe_is_refused(tmp_path):
     assert written(tmp_path) == ["mine.py"]
 
 
+def test_a_run_in_the_training_folder_made_otherwise_is_refused(tmp_path):
+    run_dir = tmp_path / "training" / "td3-rough-seed1"
+    run_dir.mkdir(parents=True)
+    (run_dir / "run.json").write_text(json.dumps({"method": "td3", "terrain": "rough", "seed": 1, "workers": 1,
+                                                  "config": {"learning_rate": 0.5}, "env_steps": 1_000_000}))
+    result = seed_run(tmp_path, "--terrain", "rough", "--seed", "1")
+    assert result.exit_code == 2 and "training/td3-rough-seed1: holds a run with config=" in result.output
+    assert not (tmp_path / "seeds").exists() and not (tmp_path / "scoring").exists()
+
+
 def test_the_recorded_command_names_the_options_away_from_their_defaults():
     from hexbench.leaderboard.seed_pipeline import SeedRunPlan
 

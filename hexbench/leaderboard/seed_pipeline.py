@@ -31,6 +31,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, fields
 from pathlib import Path
 
+from hexbench.agents.policy import config_dict
 from hexbench.artifacts.files import make_folder, os_reason
 from hexbench.errors import HexbenchError, OutputError
 from hexbench.evaluation.evaluate import evaluate
@@ -40,7 +41,7 @@ from hexbench.suite.tasks import load_suite
 from hexbench.training.batch import RUNS_COLUMNS, summary_row, write_runs_csv
 from hexbench.training.loop import train
 from hexbench.training.publish import publish_checkpoint
-from hexbench.training.runs import read_run
+from hexbench.training.runs import check_resume, read_run
 from hexbench.training.selection import select
 from hexbench.training.settings import TrainSettings, check_settings, load_run_config
 
@@ -49,8 +50,6 @@ CHECKPOINT_EVERY_ENV_STEPS = 125_000  # 8 checkpoints per 1M-step run to select 
 REPLAY_SAMPLE = 40  # episodes replayed from their action logs before the record is admitted
 SCORING_ROOT = Path("runs") / "seed-runs"  # the scoring folders (git-ignored), one per seed run
 TRAINING_FILES = ("run.json", "progress.csv", "selection.json")  # what of training/<name>/ the folder keeps
-
-
 # `hexbench seed-run` options that change what a run makes or where it lands, and their plan fields
 COMMAND_OPTIONS = (("--steps", "budget_env_steps"), ("--workers", "workers"), ("--sample", "replay_sample"),
                    ("--seeds-dir", "seeds_dir"), ("--training-dir", "training_root"), ("--scoring-dir", "scoring_root"))
@@ -117,9 +116,11 @@ class SeedRunPlan:
 def make_seed_run(plan: SeedRunPlan, say: Callable[[str], None] = lambda _line: None) -> Path:
     """Make, score and admit one seed run (module docstring); returns its folder under the seeds folder."""
     settings = plan.train_settings()
-    _check_plan(plan, settings)
+    config = _check_plan(plan, settings)
     run_dir = settings.run_dir
     run = read_run(run_dir)
+    if run is not None:  # a run to resume or take as it is: the file's recipe, not a run made otherwise
+        check_resume(run_dir, run, settings, config_dict(config))
     if run is None or run["env_steps"] < plan.budget_env_steps:
         say(f"1/5 training {plan.name}: {plan.budget_env_steps:,} env steps, a checkpoint every "
             f"{plan.checkpoint_every_env_steps:,} ({run_dir})")
@@ -153,12 +154,13 @@ def make_seed_run(plan: SeedRunPlan, say: Callable[[str], None] = lambda _line: 
     return plan.destination
 
 
-def _check_plan(plan: SeedRunPlan, settings: TrainSettings) -> None:
-    """Before hours of training: the terrain, the seed, the file's recipe and a free, writable destination."""
+def _check_plan(plan: SeedRunPlan, settings: TrainSettings):
+    """Before hours of training: the terrain, the seed, the file's recipe (returned: its CONFIG) and a free,
+    writable destination."""
     if plan.seed < 0:
         raise SeedPipelineError(f"--seed {plan.seed}: a seed run's seed is >= 0")
     check_settings(settings)
-    load_run_config(settings)  # the file and its CONFIG, as training will read them
+    config = load_run_config(settings)  # the file and its CONFIG, as training will read them
     if plan.destination.exists():
         raise SeedPipelineError(f"{plan.destination}: exists; a seed run is made once (remove the folder, or "
                                 f"choose another --seed)")
@@ -171,6 +173,7 @@ def _check_plan(plan: SeedRunPlan, settings: TrainSettings) -> None:
         probe.unlink()
     except OSError as e:
         raise OutputError(f"{plan.seeds_dir}: cannot be written ({os_reason(e)})") from None
+    return config
 
 
 def _copy(source: Path, target: Path) -> None:
