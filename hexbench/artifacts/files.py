@@ -49,6 +49,17 @@ def make_folder(path: Path) -> None:
         raise OutputError(f"{path}: exists and is not a folder")
 
 
+def check_writable(folder: Path, named: Path | None = None) -> None:
+    """OutputError unless a file can be made in `folder` (an empty probe, removed at once); the line
+    names `named` (default: the folder), e.g. a folder still to be made under `folder`."""
+    probe = Path(folder) / f".write-probe-{os.getpid()}"
+    try:
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as e:
+        raise OutputError(f"{named or folder}: cannot be written ({os_reason(e)})") from None
+
+
 @contextmanager
 def atomic_path(path: str | Path) -> Iterator[Path]:
     """A temporary name beside `path` for a writer that wants a file name (pandas, torch, SB3,

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from hexbench.artifacts.files import atomic_path, make_folder, os_reason, sha256_file, write_text_atomic
+from hexbench.artifacts.files import atomic_path, check_writable, make_folder, os_reason, sha256_file, write_text_atomic
 from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit, machine_info
 from hexbench.artifacts.records import episode_record_rows, episodes_digest, validate_record
 from hexbench.errors import HexbenchError, OutputError
@@ -184,11 +184,9 @@ def _prepare_out(out: Path) -> list[Path]:
     make_folder(out / "episodes")
     try:
         (out / ".journal").chmod(0o700)
-        probe = out / f".write-probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
     except OSError as e:
         raise OutputError(f"{out}: cannot be written ({os_reason(e)})") from None
+    check_writable(out)
     return created
 
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass, fields
 from pathlib import Path
 
 from hexbench.agents.policy import config_dict
-from hexbench.artifacts.files import make_folder, os_reason
+from hexbench.artifacts.files import check_writable, make_folder, os_reason, write_bytes_atomic
 from hexbench.errors import HexbenchError, OutputError
 from hexbench.evaluation.evaluate import evaluate
 from hexbench.leaderboard.admission import add_seed_run
@@ -134,7 +134,7 @@ def make_seed_run(plan: SeedRunPlan, say: Callable[[str], None] = lambda _line: 
     say(f"3/5 publishing the held-out best ({best['env_steps']:,} env steps) into {scoring}")
     make_folder(scoring)
     controller = scoring / Path(plan.baseline_path).name
-    _copy(Path(plan.baseline_path), controller)
+    write_bytes_atomic(controller, Path(plan.baseline_path).read_bytes())
     publish_checkpoint(run_dir, scoring / "checkpoints", "heldout")
     say(f"4/5 scoring it on every {plan.terrain} level of the protocol, sandboxed")
     tasks = load_suite().select([plan.terrain])
@@ -145,7 +145,7 @@ def make_seed_run(plan: SeedRunPlan, say: Callable[[str], None] = lambda _line: 
     say(f"5/5 replaying {plan.replay_sample or 'every'} episodes from their action logs and admitting the record")
     make_folder(scoring / "training")
     for name in TRAINING_FILES:
-        _copy(run_dir / name, scoring / "training" / name)
+        write_bytes_atomic(scoring / "training" / name, (run_dir / name).read_bytes())
     record = add_seed_run(scoring / "run", scoring, sample=plan.replay_sample, workers=plan.workers,
                           progress=plan.show_progress)
     make_folder(plan.seeds_dir)
@@ -167,20 +167,8 @@ def _check_plan(plan: SeedRunPlan, settings: TrainSettings):
     existing = Path(plan.seeds_dir)
     while not existing.exists() and existing != existing.parent:  # the folder, or where it will be made
         existing = existing.parent
-    probe = existing / f".write-probe-{os.getpid()}"
-    try:
-        probe.write_bytes(b"")
-        probe.unlink()
-    except OSError as e:
-        raise OutputError(f"{plan.seeds_dir}: cannot be written ({os_reason(e)})") from None
+    check_writable(existing, named=plan.seeds_dir)
     return config
-
-
-def _copy(source: Path, target: Path) -> None:
-    try:
-        shutil.copyfile(source, target)
-    except OSError as e:
-        raise OutputError(f"{target}: cannot be written from {source} ({os_reason(e)})") from None
 
 
 def _install(scoring: Path, record: Path, destination: Path) -> None:
