@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import dataclasses
 import errno
+import functools
 import sys
 
 import numpy as np
@@ -67,6 +68,8 @@ def declared(ctrl) -> dict:
 
 
 def action_message(action) -> bytes:
+    """The ACTION payload for what act() returned: a float array's dtype, shape and bytes, or a
+    description of anything else (never the object itself)."""
     if not isinstance(action, np.ndarray):
         return wire.array_payload({"type": type(action).__name__}, b"")
     plain = np.ndarray.view(action, np.ndarray)
@@ -75,9 +78,20 @@ def action_message(action) -> bytes:
     if plain.size > 4096:  # far beyond any action: its shape says enough
         return wire.array_payload({"type": "ndarray", "dtype": f"<f{plain.dtype.itemsize}",
                                    "shape": list(plain.shape)[:8], "truncated": True}, b"")
-    data = np.ascontiguousarray(plain, dtype=plain.dtype.newbyteorder("<"))
-    return wire.array_payload({"type": "ndarray", "dtype": f"<f{plain.dtype.itemsize}", "shape": list(plain.shape)},
-                              data.tobytes())
+    return _array_header_line(plain.dtype.itemsize, plain.shape) + _little_endian_bytes(plain)
+
+
+@functools.lru_cache(maxsize=64)
+def _array_header_line(itemsize: int, shape: tuple) -> bytes:
+    """The header line of a float array's ACTION payload. A controller returns arrays of one dtype
+    and shape step after step, so each line is made once."""
+    return wire.array_payload({"type": "ndarray", "dtype": f"<f{itemsize}", "shape": list(shape)}, b"")
+
+
+def _little_endian_bytes(array: np.ndarray) -> bytes:
+    if array.dtype.str[0] != "<":
+        array = array.astype(array.dtype.newbyteorder("<"))
+    return array.tobytes()  # C order, a copy
 
 
 class Host:

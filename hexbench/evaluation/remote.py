@@ -6,6 +6,8 @@ bounded, its weights files must lie in its own folder, and its actions are check
 
 from __future__ import annotations
 
+import functools
+import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -114,21 +116,36 @@ class RemoteController:
         _, body = self.process.call(wire.ACT, np.ascontiguousarray(obs, "<f4").tobytes(),
                                     self.process.limits.call_timeout_s, "act()", context)
         try:
-            header, raw = wire.split_array_payload(body)
-            kind = header.get("type")
-            if kind != "ndarray":
-                return NotAnArray(str(kind)[:80])
-            dtype, shape = str(header["dtype"]), [int(n) for n in header["shape"]]
-            if dtype not in ("<f4", "<f8"):
-                return WrongDtype(dtype[:40], tuple(shape))
-            if header.get("truncated"):
-                return WrongShape(tuple(shape))
-            count = int(np.prod(shape)) if shape else 1
-            if count * int(dtype[-1]) != len(raw):
+            line, raw = wire.split_header_line(body)
+            layout = action_layout(line)
+            if not isinstance(layout, tuple):
+                return layout
+            dtype, shape, size_bytes = layout
+            if len(raw) != size_bytes:
                 raise ValueError("array size does not match its shape")
             return np.frombuffer(raw, dtype=dtype).reshape(shape).astype(np.float64 if dtype == "<f8" else np.float32)
         except (ValueError, KeyError, TypeError, AttributeError, RecursionError):
             raise self.process._fail("sent a malformed action message", context) from None
+
+
+@functools.lru_cache(maxsize=64)
+def action_layout(header_line: bytes):
+    """What an ACTION payload's header line declares: (dtype, shape, size [bytes]) of a float array,
+    or the NotAnArray / WrongDtype / WrongShape that describes anything else. ValueError, KeyError or
+    TypeError (the message is malformed) if it is not such a line. A controller sends the same line
+    step after step, so each is parsed and checked once."""
+    header = json.loads(header_line)
+    if not isinstance(header, dict):
+        raise ValueError("array message header is not an object")
+    kind = header.get("type")
+    if kind != "ndarray":
+        return NotAnArray(str(kind)[:80])
+    dtype, shape = str(header["dtype"]), tuple(int(n) for n in header["shape"])
+    if dtype not in ("<f4", "<f8"):
+        return WrongDtype(dtype[:40], shape)
+    if header.get("truncated"):
+        return WrongShape(shape)
+    return dtype, shape, math.prod(shape) * int(dtype[-1])
 
 
 @dataclass(frozen=True)

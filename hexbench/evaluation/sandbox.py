@@ -227,23 +227,32 @@ class ControllerProcess:
             except (BrokenPipeError, OSError):
                 raise self._died(context) from None
 
-    def _read(self, n: int, deadline: _Deadline, context: str) -> bytes:
-        """The next n bytes from the child. Reads take what the pipe holds (a reply's header and
-        body arrive in one read), and bytes beyond n wait in the inbox for the next call."""
-        inbox = self._inbox
-        while len(inbox) < n:
+    def _receive(self, deadline: _Deadline, context: str) -> tuple[bytes, bytes]:
+        """The child's next whole message: (kind, body). Reads take what the pipe holds (a reply
+        usually arrives whole in one read); bytes beyond the message wait in the inbox for the next
+        call. A message declaring more than MAX_MESSAGE_BYTES is refused before its body is read."""
+        inbox, header_size = self._inbox, wire.HEADER.size
+        while True:
+            if len(inbox) >= header_size:
+                length, kind = wire.HEADER.unpack_from(inbox)
+                if length > wire.MAX_MESSAGE_BYTES:
+                    raise self._fail(f"the controller sent a {length:,}-byte message "
+                                     f"(limit {wire.MAX_MESSAGE_BYTES:,})", context)
+                end = header_size + length
+                if len(inbox) >= end:
+                    body = bytes(inbox[header_size:end])
+                    del inbox[:end]
+                    return wire.KINDS[kind], body
             wait_s = deadline.wait_s()
             if wait_s <= 0:
                 raise TimeoutError
             if not self._poll_in.poll(max(1, math.ceil(wait_s * 1000))):
                 continue
-            chunk = os.read(self._from_child, max(n - len(inbox), wire.READ_CHUNK_BYTES))
+            chunk = os.read(self._from_child, max(end - len(inbox) if len(inbox) >= header_size else 0,
+                                                  wire.READ_CHUNK_BYTES))
             if not chunk:
                 raise self._died(context)
             inbox += chunk
-        data = bytes(inbox[:n])
-        del inbox[:n]
-        return data
 
     def call(self, kind: bytes, payload: bytes, timeout_s: float, what: str, context: str,
              cpu_limited: bool = True) -> tuple[bytes, bytes]:
@@ -262,15 +271,10 @@ class ControllerProcess:
                              self.limits.call_wall_timeout_s if cpu_limited else timeout_s)
         try:
             self._send(wire.frame(kind, payload), deadline, context)
-            length, answer = wire.HEADER.unpack(self._read(wire.HEADER.size, deadline, context))
-            if length > wire.MAX_MESSAGE_BYTES:
-                raise self._fail(f"the controller sent a {length:,}-byte message (limit {wire.MAX_MESSAGE_BYTES:,})",
-                                 context)
-            body = self._read(length, deadline, context) if length else b""
+            answer, body = self._receive(deadline, context)
         except TimeoutError:
             limit = f"{timeout_s:g} s of CPU time" if deadline.expired_on_cpu else f"{deadline.wall_s:g} s"
             raise self._fail(f"{what} took longer than {limit}", context + " (controller process killed)") from None
-        answer = bytes([answer])
         if answer == wire.ERROR:
             try:
                 error = json.loads(body)

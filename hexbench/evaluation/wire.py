@@ -42,13 +42,20 @@ def array_payload(header: dict, raw: bytes) -> bytes:
 
 def split_array_payload(payload: bytes) -> tuple[dict, bytes]:
     """(header, raw bytes) of an ACTION or SEE payload; ValueError if malformed."""
+    line, raw = split_header_line(payload)
+    header = _header(line)
+    if not isinstance(header, dict):
+        raise ValueError("array message header is not an object")
+    return header, bytes(raw)
+
+
+def split_header_line(payload: bytes) -> tuple[bytes, memoryview]:
+    """(header line, raw bytes after it) of an ACTION or SEE payload, the header still unparsed;
+    ValueError if there is no header line."""
     end = payload.find(b"\n", 0, 4096)
     if end < 0:
         raise ValueError("array message without a header line")
-    header = _header(bytes(payload[:end]))
-    if not isinstance(header, dict):
-        raise ValueError("array message header is not an object")
-    return header, payload[end + 1:]
+    return bytes(payload[:end]), memoryview(payload)[end + 1:]
 
 
 @functools.lru_cache(maxsize=64)
@@ -83,6 +90,17 @@ class Inbox:
         return data
 
     def recv(self) -> tuple[bytes, bytes]:
+        if not self.pending:  # the usual case: one read holds exactly one whole message
+            chunk = os.read(self.fd, READ_CHUNK_BYTES)
+            if not chunk:
+                raise EOFError
+            if len(chunk) >= HEADER.size:
+                length, kind = HEADER.unpack_from(chunk)
+                if len(chunk) == HEADER.size + length:
+                    return KINDS[kind], chunk[HEADER.size:]
+            self.pending += chunk
         length, kind = HEADER.unpack(self.take(HEADER.size))
-        return bytes([kind]), self.take(length) if length else b""
+        return KINDS[kind], self.take(length) if length else b""
 
+
+KINDS = [bytes([k]) for k in range(256)]  # a message's kind byte as the bytes the constants above are

@@ -18,6 +18,7 @@ training (large batched products would slow down).
 from __future__ import annotations
 
 import os
+import sys
 
 # Environment of a controller process [variable -> value].
 CONTROLLER_MATH_ENV: dict[str, str] = {
@@ -30,10 +31,11 @@ CONTROLLER_MATH_ENV: dict[str, str] = {
 
 def use_controller_math() -> None:
     """Give this process (and the processes it starts) the controller arithmetic: call it before
-    the process imports torch, or at least before its first matrix product."""
+    the process imports torch, or at least before its first matrix product. It does not import
+    torch itself: an evaluation worker whose controllers all run sandboxed never needs it (about a
+    second of start-up per worker), and torch takes its thread count from this environment when
+    it is imported."""
     os.environ.update(CONTROLLER_MATH_ENV)
-    try:
-        import torch
-    except ImportError:
-        return
-    torch.set_num_threads(1)
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.set_num_threads(1)
