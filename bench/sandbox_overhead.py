@@ -3,12 +3,17 @@
     python bench/sandbox_overhead.py                       # PPO-CPG, 6 levels x 4 episodes, 2 workers, 3 rounds
     python bench/sandbox_overhead.py --controller baselines/cpg.py --episodes 2 --rounds 1
     python bench/sandbox_overhead.py --per-step                 # one pinned worker: act() apart from the rest
+    python bench/sandbox_overhead.py --per-step --cores 2       # the same on two cores at once, as `hexbench run` loads them
 
 The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
 else process) and in-process (`--isolation none`), alternating A/B/B/A in one run, after an untimed
 warm-up of each, so that load drifts hit both alike; the ratio is sandboxed / in-process wall time,
 per round, overall and as the median of rounds, and
 the same for the machine's busy CPU time (every process: meaningful on a quiet machine only).
+Each timed run starts its worker processes and their controller processes afresh, so at the
+default 24 episodes the one-time start-up (imports; a sandboxed worker also starts a controller
+process that imports the controller's libraries) is a part of the ratio that a full protocol run
+of 860 episodes spreads thin; `--per-step` measures the steady state alone.
 Both runs must give identical episode rows (the sandbox changes where the controller runs, never
 what it does). Then the action-log bytes per episode (always written) and per control step.
 Also the evaluator <-> controller round trip for one act() call, with the two processes on one
@@ -31,6 +36,7 @@ import numpy as np
 from hexbench.evaluation import sandbox
 from hexbench.evaluation.evaluate import evaluate
 from hexbench.evaluation.workers import pin_to_core
+from hexbench.suite.numerics import use_controller_math
 from hexbench.suite.tasks import load_suite
 
 REPO = Path(__file__).resolve().parent.parent
@@ -125,20 +131,49 @@ def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000,
     return out
 
 
+def per_step_rounds(controller: str, slot: int | None = None) -> list[tuple[str, dict]]:
+    """The per-step split A/B/A/B (sandboxed, in-process) in this process, pinned to core `slot`
+    (None: the one it runs on)."""
+    use_controller_math()  # in-process controllers multiply as in an evaluation worker
+    if slot is not None:
+        pin_to_core(slot)
+    mode = sandbox.resolve_isolation("auto")
+    return [(isolation, r) for isolation in (mode, "none", mode, "none") for r in per_step_us(controller, isolation)]
+
+
+def report_per_step(controller: str, cores: int) -> None:
+    if cores <= 1:
+        results = [per_step_rounds(controller)]
+    else:  # one process per core, all at once: both cores busy, as in `hexbench run`
+        from concurrent.futures import ProcessPoolExecutor
+        from multiprocessing import get_context
+
+        with ProcessPoolExecutor(max_workers=cores, mp_context=get_context("spawn")) as pool:
+            results = list(pool.map(per_step_rounds, [controller] * cores, range(cores)))
+    steps: dict[str, list[float]] = {}
+    for core, rounds in enumerate(results):
+        for isolation, r in rounds:
+            steps.setdefault(isolation, []).append(r["step_us"])
+            print(f"core slot {core} {isolation:<10} seed {r['seed']}: {r['steps']} steps, {r['step_us']:.0f} us per step: "
+                  f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us", flush=True)
+    mode = sandbox.resolve_isolation("auto")
+    sandboxed, in_process = statistics.median(steps[mode]), statistics.median(steps["none"])
+    print(f"median per control step: {mode} {sandboxed:.0f} us, in-process {in_process:.0f} us, "
+          f"ratio {sandboxed / in_process:.3f} ({cores} core{'s' if cores > 1 else ''} busy)")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--controller", default=str(REPO / "baselines" / "ppo_cpg.py"))
     ap.add_argument("--episodes", type=int, default=4, help="episodes per level")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rounds", type=int, default=3, help="A/B pairs")
-    ap.add_argument("--per-step", action="store_true", help="only the per-step split of one pinned worker, A/B/A/B")
+    ap.add_argument("--per-step", action="store_true", help="only the per-step split of a pinned worker, A/B/A/B")
+    ap.add_argument("--cores", type=int, default=1, help="with --per-step: that many pinned workers at once")
     args = ap.parse_args()
+    use_controller_math()  # in-process controllers here multiply as in an evaluation worker
     if args.per_step:
-        mode = sandbox.resolve_isolation("auto")
-        for isolation in (mode, "none", mode, "none"):
-            for r in per_step_us(args.controller, isolation):
-                print(f"{isolation:<10} seed {r['seed']}: {r['steps']} steps, {r['step_us']:.0f} us per step: "
-                      f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us", flush=True)
+        report_per_step(args.controller, args.cores)
         return
     suite = load_suite("v1")
     tasks = [suite.task(t, lv) for t, lv in LEVELS]
