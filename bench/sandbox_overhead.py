@@ -131,32 +131,31 @@ def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000,
     return out
 
 
-def per_step_rounds(controller: str, slot: int | None = None) -> list[tuple[str, dict]]:
-    """The per-step split A/B/A/B (sandboxed, in-process) in this process, pinned to core `slot`
-    (None: the one it runs on)."""
-    use_controller_math()  # in-process controllers multiply as in an evaluation worker
+def per_step_rounds(controller: str, mode: str, slot: int | None = None) -> list[tuple[str, dict]]:
+    """The per-step split A/B/A/B (sandboxed in `mode`, in-process) in this process, pinned to core
+    `slot` (None: the one it runs on)."""
     if slot is not None:
         pin_to_core(slot)
-    mode = sandbox.resolve_isolation("auto")
     return [(isolation, r) for isolation in (mode, "none", mode, "none") for r in per_step_us(controller, isolation)]
 
 
 def report_per_step(controller: str, cores: int) -> None:
+    mode = sandbox.resolve_isolation("auto")
     if cores <= 1:
-        results = [per_step_rounds(controller)]
-    else:  # one process per core, all at once: both cores busy, as in `hexbench run`
+        results = [per_step_rounds(controller, mode)]
+    else:  # one process per core, all at once: both cores busy, as in `hexbench run`; each spawned
+        # process inherits the controller-math environment main() set
         from concurrent.futures import ProcessPoolExecutor
         from multiprocessing import get_context
 
         with ProcessPoolExecutor(max_workers=cores, mp_context=get_context("spawn")) as pool:
-            results = list(pool.map(per_step_rounds, [controller] * cores, range(cores)))
+            results = list(pool.map(per_step_rounds, [controller] * cores, [mode] * cores, range(cores)))
     steps: dict[str, list[float]] = {}
     for core, rounds in enumerate(results):
         for isolation, r in rounds:
             steps.setdefault(isolation, []).append(r["step_us"])
             print(f"core slot {core} {isolation:<10} seed {r['seed']}: {r['steps']} steps, {r['step_us']:.0f} us per step: "
                   f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us", flush=True)
-    mode = sandbox.resolve_isolation("auto")
     sandboxed, in_process = statistics.median(steps[mode]), statistics.median(steps["none"])
     print(f"median per control step: {mode} {sandboxed:.0f} us, in-process {in_process:.0f} us, "
           f"ratio {sandboxed / in_process:.3f} ({cores} core{'s' if cores > 1 else ''} busy)")
