@@ -159,6 +159,46 @@ def test_a_waiting_controller_is_stopped_by_the_wall_time_limit_and_a_busy_machi
     assert run_episode(short_job(napper, steps=2))["steps"] == 2
 
 
+def _act_steps(path: str, limits: "sandbox.Limits", steps: int) -> None:
+    process = sandbox.ControllerProcess(path, sandbox.resolve_isolation("auto"), limits)
+    try:
+        ctrl = process.controller_for(load_suite("v1").task("stairs", 2))
+        ctrl.reset(0)
+        for step in range(steps):
+            ctrl.act(np.zeros(62, np.float32), step)
+    finally:
+        process.close()
+
+
+@pytest.mark.parametrize("nap_s, stopped_by_step", [(0.3, 6), (0.02, 70)])
+def test_a_controller_that_keeps_waiting_is_stopped_by_the_waiting_budget(tmp_path, nap_s, stopped_by_step,
+                                                                            processes_started_here):
+    """Each nap is within the per-call limits (1 s of CPU, 10 s of wall time), but all together they
+    pass the waiting budget (counted whenever the calls since the last count took 50 ms)."""
+    if not sandbox.SCHEDULER_COUNTERS:
+        pytest.skip("no per-thread scheduler counters here: waiting is not counted")
+    napper = controller(tmp_path, f"import time\ndef check(self):\n    time.sleep({nap_s})\n")
+    limits = sandbox.Limits(wait_budget_s=1.0)
+    with pytest.raises(sandbox.ControllerError, match=r"act\(\) waited without computing .* beyond the 1 s "
+                                                      r"a controller may .* at step (\d+) \(controller process killed\)") as err:
+        _act_steps(napper, limits, 200)
+    assert int(err.value.args[0].split("at step ")[1].split()[0]) < stopped_by_step
+    assert "\n" not in str(err.value)
+    assert processes_started_here() == []
+
+
+def test_a_controller_that_computes_is_not_charged_for_waiting(tmp_path):
+    """A controller busy for 30 ms per call (longer than the calls counted at once) and one with
+    sub-millisecond calls both play 200 steps on a waiting budget of 0.2 s."""
+    if not sandbox.SCHEDULER_COUNTERS:
+        pytest.skip("no per-thread scheduler counters here: waiting is not counted")
+    limits = sandbox.Limits(wait_budget_s=0.2)
+    busy = controller(tmp_path, "import time\ndef check(self):\n    end = time.thread_time() + 0.03\n"
+                                "    while time.thread_time() < end:\n        pass\n", name="busy.py")
+    _act_steps(busy, limits, 200)
+    _act_steps(CPG, limits, 200)
+
+
 def test_make_controller_has_a_deadline_enforced_from_outside(tmp_path, processes_started_here):
     path = tmp_path / "hang.py"
     path.write_text("import time\ndef make_controller(task):\n    while True:\n        time.sleep(1)\n")

@@ -39,6 +39,12 @@ class Limits:
     make_timeout_s: float = 120.0  # start-up, import and make_controller(task) [s]
     call_timeout_s: float = 1.0  # CPU time of the controller's process tree per reset(), act() or see() (protocol v1) [s]
     call_wall_timeout_s: float = 10.0  # wall time per call, for controllers that wait instead of computing [s]
+    # Waiting: the time a controller's calls take while none of its threads runs or is ready to run
+    # (sleeping, blocked) and the evaluator is not kept from running either. Each call may wait as
+    # long as the controller computed (a VM's stolen time shows up as waiting) plus wait_free_per_call_s;
+    # waiting beyond that is summed over the controller process's life and may reach wait_budget_s.
+    wait_free_per_call_s: float = 0.001  # [s]
+    wait_budget_s: float = 60.0  # [s]
 
 
 DEFAULT_LIMITS = Limits()
@@ -108,7 +114,9 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
               if seccomp_available() else "off",
               "user": user,
               "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,
-              "make_timeout_s": limits.make_timeout_s, "call_timeout_s": limits.call_timeout_s}
+              "make_timeout_s": limits.make_timeout_s, "call_timeout_s": limits.call_timeout_s,
+              "call_wall_timeout_s": limits.call_wall_timeout_s, "wait_free_per_call_s": limits.wait_free_per_call_s,
+              "wait_budget_s": limits.wait_budget_s}
     if mode == "bubblewrap":
         record.update(bubblewrap=bubblewrap_version(), network="none (own network namespace)",
                       filesystem="read-only: Python environment, hexbench, controller folder; private scratch")
