@@ -58,6 +58,7 @@ class Case:
     then_cpg: bool = False  # baselines/cpg.py follows on the same command line and must still be evaluated
     extra_args: tuple[str, ...] = ()
     error_words: tuple[str, ...] = ()  # the error line names one of these (case-insensitive)
+    slow: bool = False  # over a minute: runs with `-m slow`
     out: str = ""  # the output folder: "" tmp_path/out; "runs": runs/<name>-v1 next to a copy of the file (the
     # default layout when the file sits in the working directory); "same": the copy's own folder
 
@@ -101,6 +102,8 @@ CASES: dict[str, Case] = {
     "attack_ignore_sigalrm": Case(ERROR, max_s=20.0, error_words=TIMEOUT_WORDS),
     "attack_c_busy_act": Case(ERROR, max_s=20.0, error_words=TIMEOUT_WORDS),
     "attack_cpu_burn_reset": Case(ERROR, max_s=20.0, error_words=TIMEOUT_WORDS),
+    # each call within its limits, but a minute of waiting in all is the most a controller may spend
+    "attack_slow_loris": Case(ERROR, max_s=120.0, slow=True, error_words=("waited without computing",)),
 }
 
 
@@ -281,7 +284,8 @@ def test_every_attack_file_has_a_case_and_a_docstring():
         assert doc and "honest evaluator must" in doc.replace("\n", " "), f"{f.name}: docstring says what is attacked and what an honest evaluator must do"
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, marks=pytest.mark.timeout(CASES[n].max_s + 90)) for n in sorted(CASES)])
+@pytest.mark.parametrize("name", [pytest.param(n, marks=[pytest.mark.timeout(CASES[n].max_s + 90)]
+                                                   + ([pytest.mark.slow] if CASES[n].slow else [])) for n in sorted(CASES)])
 def test_attack_is_contained(name, tmp_path):
     case = CASES[name]
     if case.needs_bwrap and not HAVE_BWRAP:
