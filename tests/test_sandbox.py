@@ -187,6 +187,26 @@ def test_a_controller_that_keeps_waiting_is_stopped_by_the_waiting_budget(tmp_pa
     assert processes_started_here() == []
 
 
+def test_make_controller_after_start_up_counts_its_waiting(tmp_path):
+    """Start-up (imports, the first make_controller) may wait; a later make_controller that sleeps
+    is counted, so that 43 tasks cannot each cost make_timeout_s."""
+    if not sandbox.SCHEDULER_COUNTERS:
+        pytest.skip("no per-thread scheduler counters here: waiting is not counted")
+    path = tmp_path / "slow_make.py"
+    path.write_text("import time\nimport numpy as np\nMADE = []\n"
+                    "class C:\n    action_mode = 'cpg_residual'\n    def reset(self, seed):\n        pass\n"
+                    "    def act(self, obs):\n        return np.zeros(18, dtype=np.float32)\n"
+                    "def make_controller(task):\n    time.sleep(1.5)\n    MADE.append(task)\n    return C()\n")
+    process = sandbox.ControllerProcess(str(path), sandbox.resolve_isolation("auto"), sandbox.Limits(wait_budget_s=1.0))
+    suite = load_suite("v1")
+    try:
+        process.controller_for(suite.task("stairs", 2))  # start-up: 1.5 s of sleep, not counted
+        with pytest.raises(sandbox.ControllerError, match=r"make_controller waited without computing .* for stairs"):
+            process.controller_for(suite.task("stairs", 4))
+    finally:
+        process.close()
+
+
 def test_a_controller_that_computes_is_not_charged_for_waiting(tmp_path):
     """A controller busy for 30 ms per call (longer than the calls counted at once) and one with
     sub-millisecond calls both play 200 steps on a waiting budget of 0.2 s."""

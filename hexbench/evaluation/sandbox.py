@@ -318,17 +318,20 @@ class ControllerProcess:
             inbox += chunk
 
     def call(self, kind: bytes, payload: bytes, timeout_s: float, what: str, context: str,
-             cpu_limited: bool = True) -> tuple[bytes, bytes]:
+             cpu_limited: bool = True, waiting_counted: bool | None = None) -> tuple[bytes, bytes]:
         """Send one message and wait for the answer; any failure kills the process and is one ControllerError.
 
         cpu_limited: the answer may cost the controller `timeout_s` of CPU time and take at most
         `call_wall_timeout_s` of wall time (a loaded machine does not fail an honest controller;
         a sleeping one is still stopped); otherwise `timeout_s` is wall time (start-up, make_controller).
+        waiting_counted: whether the call's waiting counts against Limits.wait_budget_s (default:
+        if cpu_limited; start-up, with its imports from disk, is never counted).
         """
         if self.proc is None:
             raise ControllerError(f"{self.file}: the controller process has already been stopped")
-        if not cpu_limited:
-            self._count_busy_s = None  # start-up and make_controller are neither CPU-limited nor counted
+        counted = cpu_limited if waiting_counted is None else waiting_counted
+        if not counted:
+            self._count_busy_s = None  # the next count starts afresh after this call
         elif self._count_busy_s is None:
             self._start_count()
         deadline = _Deadline(self, timeout_s if cpu_limited else None,
@@ -339,7 +342,7 @@ class ControllerProcess:
         except TimeoutError:
             limit = f"{timeout_s:g} s of CPU time" if deadline.expired_on_cpu else f"{deadline.wall_s:g} s"
             raise self._fail(f"{what} took longer than {limit}", context + " (controller process killed)") from None
-        if cpu_limited:
+        if counted:
             self._count_wall_s += time.monotonic() - deadline.start
             self._count_calls += 1
             if self._count_wall_s > COUNT_AFTER_S or self._count_calls >= COUNT_AFTER_CALLS:
@@ -363,8 +366,11 @@ class ControllerProcess:
     def controller_for(self, task) -> RemoteController:
         if task.name not in self.built:
             context = "during start-up" if not self.built else f"for {task.name}"
+            # after start-up, make_controller's waiting is counted: one that sleeps must not cost
+            # make_timeout_s for each task of the suite (43 in protocol v1)
             _, body = self.call(wire.MAKE, wire.json_payload({"file": str(self.path), "task": dataclasses.asdict(task)}),
-                                self.limits.make_timeout_s, "make_controller", context, cpu_limited=False)
+                                self.limits.make_timeout_s, "make_controller", context, cpu_limited=False,
+                                waiting_counted=bool(self.built))
             try:
                 info = json.loads(body)
             except (ValueError, RecursionError):
