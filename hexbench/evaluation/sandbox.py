@@ -63,7 +63,7 @@ from hexbench.suite.controller import ControllerError
 _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 # The controller's CPU time is sampled, and its waiting counted (Limits.wait_budget_s), once the calls
 # since the last count have taken COUNT_AFTER_S of wall time or numbered COUNT_AFTER_CALLS: reading the
-# counters costs 0.1-0.25 ms (a few us a call amortized), and the sample a slow call's CPU time is
+# counters costs about 0.25 ms on a loaded 2-core VM (a few us a call amortized), and the sample a slow call's CPU time is
 # measured from stays at most some 50 ms of calls old.
 COUNT_AFTER_S = 0.05
 COUNT_AFTER_CALLS = 64
