@@ -63,8 +63,8 @@ from hexbench.suite.controller import ControllerError
 _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 # The controller's CPU time is sampled, and its waiting counted (Limits.wait_budget_s), once the calls
 # since the last count have taken COUNT_AFTER_S of wall time or numbered COUNT_AFTER_CALLS: reading the
-# counters costs about 0.25 ms on a loaded 2-core VM (a few us a call amortized), and the sample a slow call's CPU time is
-# measured from stays at most some 50 ms of calls old.
+# counters costs about 0.25 ms on a loaded 2-core VM (a few us a call amortized), and the sample a slow
+# call's CPU time is measured from stays at most some 50 ms of calls old.
 COUNT_AFTER_S = 0.05
 COUNT_AFTER_CALLS = 64
 SCHEDULER_COUNTERS = Path("/proc/thread-self/schedstat").is_file()  # else waiting is not counted
@@ -264,7 +264,8 @@ class ControllerProcess:
         busy_s = self._count_busy_s - busy_before_s
         self._waited_s += max(0.0, wall_s - 2 * busy_s - calls * self.limits.wait_free_per_call_s)
         if self._waited_s > self.limits.wait_budget_s:
-            raise self._fail(f"{what} waited without computing (sleeping or blocked) for {self._waited_s:.0f} s in all, "
+            raise self._fail(f"{what} waited without computing (sleeping or blocked) "
+                             f"for {self._waited_s:.0f} s in all, "
                              f"beyond the {self.limits.wait_budget_s:g} s a controller may (each call may wait as "
                              f"long as it computes, plus {self.limits.wait_free_per_call_s * 1e3:g} ms)",
                              context + " (controller process killed)")
