@@ -1,0 +1,155 @@
+"""One PyBullet build against another: CPU time per control step on the same protocol episodes,
+and whether both still play every episode exactly as the committed record holds it.
+
+    pip wheel --no-deps --no-binary pybullet "pybullet==3.2.7" -w build/pybullet-src   # PyBullet built here
+    python bench/physics_build.py --other build/pybullet-src/pybullet-3.2.7-cp311-cp311-linux_x86_64.whl
+    python bench/physics_build.py --other DIR --rounds 3 --episodes 2
+
+`--other` is a pybullet wheel or a folder holding a built `pybullet*.so`; a child process given
+that folder (or the wheel's extension module, unpacked) first on its PYTHONPATH imports that build
+instead of the installed one. Each round runs two children at once, one pinned to each of the
+first two cores this process may use: the installed build on the first and the other on the
+second, then swapped, so both builds meet the same load and the same core. Each child plays the
+same PPO-CPG episodes of protocol v1 (episode indexes 0 .. N-1 of six levels across rough, slopes
+and stairs, as `hexbench run` seeds them) in one process, the controller in-process with the
+evaluation worker's capped math, and times each episode's CPU (`time.process_time`). The ratio is
+other / installed CPU per control step, per round and as the median of rounds. Every row each child
+plays must equal, field for field, the row of leaderboard/ppo_cpg.json for the same episode:
+a build that changes any bit of the physics changes those rows, and the script says which.
+Writes bench/out/physics_build.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+import zipfile
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parent.parent
+RECORD = REPO / "leaderboard" / "ppo_cpg.json"
+CONTROLLER = REPO / "baselines" / "ppo_cpg.py"
+LEVELS: tuple[tuple[str, float], ...] = (("rough", 3.0), ("rough", 7.0), ("slopes", 9.0), ("slopes", 15.0),
+                                        ("stairs", 4.0), ("stairs", 7.0))
+
+
+def play_episodes(episodes: int, out: Path) -> None:
+    """Child: play the episodes with whichever pybullet this process imports; write their times and checks."""
+    from hexbench.suite.numerics import use_controller_math
+
+    use_controller_math()
+    import pybullet
+
+    from hexbench.artifacts.records import ROW_FIELDS
+    from hexbench.suite.controller import make_controller
+    from hexbench.suite.rollout import LocalActor, play
+    from hexbench.suite.tasks import episode_seed, load_suite
+
+    record = json.loads(RECORD.read_text())
+    committed = {(r["terrain"], r["level"], r["index"]): r for r in record["episodes"]}
+    suite = load_suite(record["protocol"])
+    rows = []
+    for terrain, level in LEVELS:
+        task = suite.task(terrain, level)
+        actor = LocalActor(make_controller(CONTROLLER, task))
+        for index in range(episodes):
+            seed = episode_seed(record["protocol"], terrain, level, index)
+            started_cpu_s = time.process_time()
+            episode = play(task, seed, actor, index=index, controller_seed=0)
+            cpu_s = time.process_time() - started_cpu_s
+            ref = committed[(terrain, level, index)]
+            differing = [k for k in ROW_FIELDS if k in episode.row and episode.row[k] != ref[k]]
+            rows.append({"terrain": terrain, "level": level, "index": index, "steps": episode.row["steps"],
+                         "cpu_s": cpu_s, "differs_from_record_in": differing})
+    out.write_text(json.dumps({"pybullet": pybullet.__file__, "episodes": rows}))
+
+
+def run_pair(other: Path, episodes: int, cores: tuple[int, int], folder: Path, tag: str) -> dict[str, dict]:
+    """Both builds at once, the installed one pinned to cores[0] and the other to cores[1]; their child reports by build."""
+    procs = {}
+    for build, core in (("installed", cores[0]), ("other", cores[1])):
+        env = dict(os.environ)
+        if build == "other":
+            env["PYTHONPATH"] = os.pathsep.join([str(other)] + [p for p in [env.get("PYTHONPATH")] if p])
+        out = folder / f"{tag}-{build}.json"
+        cmd = ["taskset", "-c", str(core), sys.executable, __file__, "--child", str(out), "--episodes", str(episodes)]
+        procs[build] = (subprocess.Popen(cmd, env=env, cwd=REPO), out)
+    reports = {}
+    for build, (proc, out) in procs.items():
+        if proc.wait() != 0:
+            sys.exit(f"physics_build: the {build} build's child failed (exit {proc.returncode})")
+        reports[build] = json.loads(out.read_text())
+    return reports
+
+
+def other_build_folder(other: Path | None, scratch: Path) -> Path:
+    """A folder whose pybullet*.so shadows the installed build: --other itself, or its wheel's module unpacked."""
+    if other is not None and other.is_file() and other.suffix == ".whl":
+        try:
+            with zipfile.ZipFile(other) as wheel:
+                modules = [n for n in wheel.namelist() if "/" not in n and n.startswith("pybullet") and n.endswith(".so")]
+                if modules:
+                    wheel.extract(modules[0], scratch / "other")
+                    return (scratch / "other").resolve()
+        except zipfile.BadZipFile:
+            pass
+        sys.exit(f"physics_build: {other} is not a pybullet wheel with its extension module")
+    if other is None or not other.is_dir() or not any(other.glob("pybullet*.so")):
+        sys.exit(f"physics_build: --other must name a pybullet wheel or a folder holding a pybullet*.so (got {other})")
+    return other.resolve()
+
+
+def us_per_step(report: dict) -> float:
+    rows = report["episodes"]
+    return 1e6 * sum(r["cpu_s"] for r in rows) / sum(r["steps"] for r in rows)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--other", type=Path, help="the other pybullet build: a wheel, or a folder holding a pybullet*.so")
+    parser.add_argument("--episodes", type=int, default=2, help="episodes per level [count]")
+    parser.add_argument("--rounds", type=int, default=2, help="rounds of two swapped pairs")
+    parser.add_argument("--child", type=Path, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.child:
+        play_episodes(args.episodes, args.child)
+        return
+    cores = sorted(os.sched_getaffinity(0))[:2]
+    if len(cores) < 2:
+        sys.exit("physics_build: needs two cores to run both builds at once")
+    rounds = []
+    with tempfile.TemporaryDirectory() as tmp:
+        other_folder = other_build_folder(args.other, Path(tmp))
+        for r in range(args.rounds):
+            halves = [run_pair(other_folder, args.episodes, pair, Path(tmp), f"{r}-{pair[0]}")
+                      for pair in ((cores[0], cores[1]), (cores[1], cores[0]))]
+            installed = [us_per_step(h["installed"]) for h in halves]
+            other = [us_per_step(h["other"]) for h in halves]
+            differing = sorted({f"{b}: {e['terrain']} {e['level']:g} #{e['index']} ({', '.join(e['differs_from_record_in'])})"
+                                for h in halves for b in h for e in h[b]["episodes"] if e["differs_from_record_in"]})
+            rounds.append({"installed_us_per_step": installed, "other_us_per_step": other,
+                           "ratio": sum(other) / sum(installed), "differing_episodes": differing,
+                           "builds": {b: halves[0][b]["pybullet"] for b in halves[0]},
+                           "steps_per_child": sum(e["steps"] for e in halves[0]["installed"]["episodes"])})
+            print(f"round {r + 1}: installed {installed[0]:.0f}, {installed[1]:.0f} us/step; other {other[0]:.0f}, "
+                  f"{other[1]:.0f} us/step; other / installed {rounds[-1]['ratio']:.3f}; "
+                  f"rows equal to the record: {'all' if not differing else 'NOT ' + '; '.join(differing)}", flush=True)
+    summary = {"median_ratio": statistics.median(r["ratio"] for r in rounds),
+               "all_rows_equal_record": not any(r["differing_episodes"] for r in rounds),
+               "episodes_per_level": args.episodes, "levels": [list(x) for x in LEVELS], "rounds": rounds,
+               "command": " ".join([Path(sys.argv[0]).as_posix()] + sys.argv[1:])}
+    print(f"median other / installed CPU per control step: {summary['median_ratio']:.3f}; "
+          f"every row equal to the committed record's: {summary['all_rows_equal_record']}")
+    out = REPO / "bench" / "out" / "physics_build.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(summary, indent=1))
+
+
+if __name__ == "__main__":
+    main()
