@@ -39,14 +39,18 @@ LEVELS: tuple[tuple[str, float], ...] = (("rough", 3.0), ("rough", 7.0), ("slope
                                         ("stairs", 4.0), ("stairs", 7.0))
 
 
-def play_episodes(episodes: int, out: Path) -> None:
-    """Child: play the episodes with whichever pybullet this process imports; write their times and checks."""
+def play_episodes(episodes: int, slot: int, out: Path) -> None:
+    """Child: pinned to the `slot`-th allowed core, play the episodes with whichever pybullet this process
+    imports; write their times and checks."""
+    from hexbench.evaluation.workers import pin_to_core
     from hexbench.suite.numerics import use_controller_math
+
+    pin_to_core(slot)
 
     use_controller_math()
     import pybullet
 
-    from hexbench.artifacts.records import ROW_FIELDS
+    from hexbench.evaluation.episode import first_row_difference
     from hexbench.suite.controller import make_controller
     from hexbench.suite.rollout import LocalActor, play
     from hexbench.suite.tasks import episode_seed, load_suite
@@ -63,22 +67,22 @@ def play_episodes(episodes: int, out: Path) -> None:
             started_cpu_s = time.process_time()
             episode = play(task, seed, actor, index=index, controller_seed=0)
             cpu_s = time.process_time() - started_cpu_s
-            ref = committed[(terrain, level, index)]
-            differing = [k for k in ROW_FIELDS if k in episode.row and episode.row[k] != ref[k]]
+            difference = first_row_difference(committed[(terrain, level, index)], episode.row)
             rows.append({"terrain": terrain, "level": level, "index": index, "steps": episode.row["steps"],
-                         "cpu_s": cpu_s, "differs_from_record_in": differing})
+                         "cpu_s": cpu_s, "difference_from_record": difference})
     out.write_text(json.dumps({"pybullet": pybullet.__file__, "episodes": rows}))
 
 
-def run_pair(other: Path, episodes: int, cores: tuple[int, int], folder: Path, tag: str) -> dict[str, dict]:
-    """Both builds at once, the installed one pinned to cores[0] and the other to cores[1]; their child reports by build."""
+def run_pair(other: Path, episodes: int, installed_slot: int, folder: Path, tag: str) -> dict[str, dict]:
+    """Both builds at once, the installed one pinned to the `installed_slot`-th allowed core (0 or 1) and the other
+    to the other of the first two; their children's reports by build."""
     procs = {}
-    for build, core in (("installed", cores[0]), ("other", cores[1])):
+    for build, slot in (("installed", installed_slot), ("other", 1 - installed_slot)):
         env = dict(os.environ)
         if build == "other":
             env["PYTHONPATH"] = os.pathsep.join([str(other)] + [p for p in [env.get("PYTHONPATH")] if p])
         out = folder / f"{tag}-{build}.json"
-        cmd = ["taskset", "-c", str(core), sys.executable, __file__, "--child", str(out), "--episodes", str(episodes)]
+        cmd = [sys.executable, __file__, "--child", str(out), "--slot", str(slot), "--episodes", str(episodes)]
         procs[build] = (subprocess.Popen(cmd, env=env, cwd=REPO), out)
     reports = {}
     for build, (proc, out) in procs.items():
@@ -93,7 +97,8 @@ def other_build_folder(other: Path | None, scratch: Path) -> Path:
     if other is not None and other.is_file() and other.suffix == ".whl":
         try:
             with zipfile.ZipFile(other) as wheel:
-                modules = [n for n in wheel.namelist() if "/" not in n and n.startswith("pybullet") and n.endswith(".so")]
+                modules = [n for n in wheel.namelist()
+                           if "/" not in n and n.startswith("pybullet") and n.endswith(".so")]
                 if modules:
                     wheel.extract(modules[0], scratch / "other")
                     return (scratch / "other").resolve()
@@ -101,7 +106,8 @@ def other_build_folder(other: Path | None, scratch: Path) -> Path:
             pass
         sys.exit(f"physics_build: {other} is not a pybullet wheel with its extension module")
     if other is None or not other.is_dir() or not any(other.glob("pybullet*.so")):
-        sys.exit(f"physics_build: --other must name a pybullet wheel or a folder holding a pybullet*.so (got {other})")
+        sys.exit(f"physics_build: --other must name a pybullet wheel or a folder holding a pybullet*.so "
+                 f"(got {other})")
     return other.resolve()
 
 
@@ -112,27 +118,27 @@ def us_per_step(report: dict) -> float:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--other", type=Path, help="the other pybullet build: a wheel, or a folder holding a pybullet*.so")
+    parser.add_argument("--other", type=Path,
+                        help="the other pybullet build: a wheel, or a folder holding a pybullet*.so")
     parser.add_argument("--episodes", type=int, default=2, help="episodes per level [count]")
     parser.add_argument("--rounds", type=int, default=2, help="rounds of two swapped pairs")
     parser.add_argument("--child", type=Path, help=argparse.SUPPRESS)
+    parser.add_argument("--slot", type=int, default=0, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.child:
-        play_episodes(args.episodes, args.child)
+        play_episodes(args.episodes, args.slot, args.child)
         return
-    cores = sorted(os.sched_getaffinity(0))[:2]
-    if len(cores) < 2:
+    if len(os.sched_getaffinity(0)) < 2:
         sys.exit("physics_build: needs two cores to run both builds at once")
     rounds = []
     with tempfile.TemporaryDirectory() as tmp:
         other_folder = other_build_folder(args.other, Path(tmp))
         for r in range(args.rounds):
-            halves = [run_pair(other_folder, args.episodes, pair, Path(tmp), f"{r}-{pair[0]}")
-                      for pair in ((cores[0], cores[1]), (cores[1], cores[0]))]
+            halves = [run_pair(other_folder, args.episodes, slot, Path(tmp), f"{r}-{slot}") for slot in (0, 1)]
             installed = [us_per_step(h["installed"]) for h in halves]
             other = [us_per_step(h["other"]) for h in halves]
-            differing = sorted({f"{b}: {e['terrain']} {e['level']:g} #{e['index']} ({', '.join(e['differs_from_record_in'])})"
-                                for h in halves for b in h for e in h[b]["episodes"] if e["differs_from_record_in"]})
+            differing = sorted({f"{b}: {e['terrain']} {e['level']:g} #{e['index']} ({e['difference_from_record']})"
+                                for h in halves for b in h for e in h[b]["episodes"] if e["difference_from_record"]})
             rounds.append({"installed_us_per_step": installed, "other_us_per_step": other,
                            "ratio": sum(other) / sum(installed), "differing_episodes": differing,
                            "builds": {b: halves[0][b]["pybullet"] for b in halves[0]},
