@@ -14,3 +14,8 @@ class HexbenchError(Exception):
 
 class OutputError(HexbenchError):
     """A run's output folder or file cannot be written (read-only, not a folder, name too long, disk full)."""
+
+
+class InputError(HexbenchError):
+    """A file given to hexbench cannot be taken: missing, unreadable, not a plain file (a pipe or a
+    device would make reading hang or never end), larger than its format allows, or malformed."""

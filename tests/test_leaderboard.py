@@ -290,7 +290,7 @@ def test_build_refuses_a_bad_record_but_shows_the_good_ones(board_dir, records):
     (board_dir / "notjson.json").write_text("{nope")
     result = lb.build(board_dir)
     assert len(result.errors) == 2 and "broken.json: missing episode" in result.errors[0]
-    assert "notjson.json: not JSON" in result.errors[1]
+    assert "notjson.json: not valid JSON" in result.errors[1]
     assert [r.label for r in result.board.measured] == ["strong", "middling", "weak"]
 
 

@@ -61,6 +61,7 @@ class Case:
     slow: bool = False  # over a minute: runs with `-m slow`
     out: str = ""  # the output folder: "" tmp_path/out; "runs": runs/<name>-v1 next to a copy of the file (the
     # default layout when the file sits in the working directory); "same": the copy's own folder
+    sparse_files: tuple[tuple[str, int], ...] = ()  # (name, size [bytes]) of sparse files made beside a copy of the file
 
 
 TIMEOUT_WORDS = ("timeout", "timed out", "took longer", "deadline", "time limit")
@@ -88,6 +89,8 @@ CASES: dict[str, Case] = {
     "attack_pickle_reduce": Case(EITHER),
     "attack_wire_nesting": Case(EITHER),
     "attack_checkpoint_path": Case(ERROR),
+    "attack_huge_checkpoint": Case(ERROR, max_s=30.0, sparse_files=(("huge_weights.bin", 200 << 30),),
+                                   error_words=("bytes",)),
     "attack_camera_spec": Case(EITHER, max_s=20.0),
     "attack_wire_make_info": Case(EITHER),
     "attack_stderr_injection": Case(ERROR),
@@ -224,10 +227,12 @@ class _Listeners:
 
 
 # ---------------------------------------------------------------------------------- the runs
-def _controller_file(name: str, tmp_path: Path, listeners: _Listeners | None, copy: bool) -> Path:
-    """The file to run: the corpus file, or a copy in tmp_path (with the test server's port)."""
+def _controller_file(name: str, tmp_path: Path, listeners: _Listeners | None, copy: bool,
+                     sparse_files: tuple[tuple[str, int], ...] = ()) -> Path:
+    """The file to run: the corpus file, or a copy in tmp_path (with the test server's port and
+    the sparse files its case asks for beside it)."""
     src = CONTROLLERS / f"{name.split('@')[0]}.py"
-    if listeners is None and not copy:
+    if listeners is None and not copy and not sparse_files:
         return src
     text = src.read_text()
     if listeners is not None:
@@ -236,6 +241,9 @@ def _controller_file(name: str, tmp_path: Path, listeners: _Listeners | None, co
     copy = tmp_path / "work" / src.name
     copy.parent.mkdir()
     copy.write_text(text)
+    for file_name, size_bytes in sparse_files:
+        with open(copy.parent / file_name, "wb") as f:
+            f.truncate(size_bytes)
     return copy
 
 
@@ -296,7 +304,7 @@ def test_attack_is_contained(name, tmp_path):
     listeners = _Listeners() if name == "attack_socket" else None
     problems: list[str] = []
     try:
-        controller = _controller_file(name, tmp_path, listeners, bool(case.out))
+        controller = _controller_file(name, tmp_path, listeners, bool(case.out), case.sparse_files)
         out_dir = {"": tmp_path / "out", "runs": controller.parent / "runs" / f"{controller.stem}-v1",
                    "same": controller.parent}[case.out]
         files = [str(controller)] + ([str(CPG)] if case.then_cpg else [])

@@ -3,6 +3,7 @@
 import json
 import os
 import textwrap
+import time
 from pathlib import Path
 
 import numpy as np
@@ -253,6 +254,26 @@ def test_unknown_isolation_and_missing_files_are_one_line(tmp_path):
     folder = runner.invoke(app, ["check", str(tmp_path)])
     assert folder.exit_code == 1 and "is a folder; expected a controller file" in folder.output
     assert "Traceback" not in folder.output + res.output
+
+
+def test_a_pipe_or_a_huge_controller_file_is_one_line_and_the_others_still_run(tmp_path):
+    """The evaluator hashes a controller file before anything runs: a pipe would make that wait
+    forever, a huge sparse file read for hours. Each is one line; the file after them still runs."""
+    from hexbench.suite.controller import MAX_CONTROLLER_FILE_BYTES
+
+    pipe, huge = tmp_path / "pipe.py", tmp_path / "huge.py"
+    os.mkfifo(pipe)
+    with open(huge, "wb") as f:
+        f.truncate(MAX_CONTROLLER_FILE_BYTES + 1)
+    t0 = time.monotonic()
+    res = CliRunner().invoke(app, ["run", str(pipe), str(huge), CPG, "--terrain", "stairs", "--levels", "2",
+                                   "--episodes", "1", "--workers", "1", "--no-record", "--out", str(tmp_path / "o")])
+    assert time.monotonic() - t0 < 60
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("error: ")]
+    assert res.exit_code == 1 and len(errors) == 2, res.output
+    assert "pipe.py: is not a plain file" in errors[0] and "huge.py: 16,777,217 bytes" in errors[1]
+    assert (tmp_path / "o" / "cpg" / "result.json").is_file()
+    assert not (tmp_path / "o" / "pipe").exists() and not (tmp_path / "o" / "huge").exists()
 
 
 @pytest.mark.parametrize("make_out", ["file", "readonly", "long"])

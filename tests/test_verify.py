@@ -1,13 +1,15 @@
 """hexbench verify RUN_DIR: replay from action logs alone; forged rows, logs and summaries are named."""
 
 import json
+import os
 import shutil
+import time
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
-from hexbench.artifacts.records import episodes_digest
+from hexbench.artifacts.records import MAX_RECORD_BYTES, episodes_digest
 from hexbench.cli import app
 from hexbench.evaluation.evaluate import evaluate
 from hexbench.replay.verify import verify_run
@@ -132,3 +134,47 @@ def test_resume_takes_a_journal_entry_only_if_its_action_log_replays_into_it(tmp
     again = evaluate(CPG, tasks, out, workers=1, record=False, progress=False)
     assert again.record["episodes"] == first.record["episodes"]  # the planted row was re-run, not taken
     assert json.loads(entry_file.read_text())["row"]["progress_m"] == honest
+
+
+def _make_hostile(path: Path, how: str, size_bytes: int) -> None:
+    """Replace `path` by something reading would choke on: a pipe (open waits for a writer), a
+    device (endless bytes), a sparse file past its format's bound, or JSON nested past the parser."""
+    path.unlink(missing_ok=True)
+    if how == "pipe":
+        os.mkfifo(path)
+    elif how == "device":
+        path.symlink_to("/dev/zero")
+    elif how == "huge":
+        with open(path, "wb") as f:
+            f.truncate(size_bytes + 1)
+    else:
+        path.write_text("[" * 200_000)
+
+
+@pytest.mark.parametrize("how", ["pipe", "device", "huge", "nested"])
+@pytest.mark.parametrize("command", ["verify", "leaderboard add"])
+def test_a_hostile_result_file_is_one_line_at_once(run, tmp_path, how, command):
+    """A run folder comes from anyone (`hexbench leaderboard add`): a result.json that would make
+    reading hang, never end or the parser recurse is refused with one line, in moments."""
+    hostile = _copy(run, tmp_path)
+    _make_hostile(hostile / "result.json", how, MAX_RECORD_BYTES)
+    args = command.split() + [str(hostile)] + (["--dir", str(tmp_path / "board")] if command != "verify" else [])
+    t0 = time.monotonic()
+    res = CliRunner().invoke(app, args)
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert time.monotonic() - t0 < 10
+    assert res.exit_code != 0 and len(lines) == 1 and "result.json" in lines[0], res.output
+    assert "Traceback" not in res.output and not (tmp_path / "board").exists()
+
+
+@pytest.mark.parametrize("how", ["pipe", "device", "huge"])
+def test_a_hostile_action_log_names_its_episode_at_once(run, tmp_path, how):
+    from hexbench.artifacts.action_log import MAX_FILE_BYTES
+
+    hostile = _copy(run, tmp_path)
+    log = sorted((hostile / "episodes").glob("*.actions"))[0]
+    _make_hostile(log, how, MAX_FILE_BYTES)
+    t0 = time.monotonic()
+    report = verify_run(hostile)
+    assert time.monotonic() - t0 < 30
+    assert not report.ok and log.name in report.message and "episode" in report.message, report.message

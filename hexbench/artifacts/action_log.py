@@ -27,14 +27,17 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.artifacts.files import write_bytes_atomic
-from hexbench.errors import HexbenchError
+from hexbench.artifacts.files import read_bytes_bounded, write_bytes_atomic
+from hexbench.errors import HexbenchError, InputError
 
 MAGIC = b"HXACT1\n"
 SUFFIX = ".actions"
 MAX_HEADER_BYTES = 4096
 MAX_STEPS = 100_000  # far above any protocol's step limit; bounds what a reader decompresses
 MAX_DIM = 64
+# The largest file a log of MAX_STEPS x MAX_DIM float32 actions can be (zlib adds at most some 0.1% to
+# what does not compress, plus a few bytes) [bytes]: a reader refuses anything larger before reading it.
+MAX_FILE_BYTES = len(MAGIC) + MAX_HEADER_BYTES + 1 + MAX_STEPS * MAX_DIM * 4 * 1001 // 1000 + 64
 HEADER_FIELDS = ("protocol", "terrain", "level", "index", "seed", "action_mode", "steps", "dim")
 
 
@@ -110,9 +113,9 @@ def write(path: Path, log: ActionLog) -> str:
 def read(path: Path, expected_sha256: str | None = None) -> ActionLog:
     """Read and check a log; with `expected_sha256`, the file must hash to it."""
     try:
-        data = Path(path).read_bytes()
-    except OSError as e:
-        raise ActionLogError(f"{path}: action log cannot be read ({e.strerror or e})") from None
+        data = read_bytes_bounded(path, MAX_FILE_BYTES, "action log")
+    except InputError as e:
+        raise ActionLogError(str(e)) from None
     if expected_sha256 is not None and hashlib.sha256(data).hexdigest() != expected_sha256:
         raise ActionLogError(f"{path}: action log sha256 differs from the one in its episode row")
     return decode(data, str(path))

@@ -1,4 +1,10 @@
-"""Hashing and atomic writes: the one place files are hashed and written whole or not at all.
+"""Hashing, bounded reads and atomic writes: the one place files are hashed, read from untrusted
+folders and written whole or not at all.
+
+A file that may come from someone else (a submitted run folder, a record, a controller's weights) is
+read only if it is a plain file no larger than its format allows (`read_bytes_bounded`,
+`read_json_bounded`, `sha256_file(..., max_bytes=)`): a pipe would make the read hang, a device
+or a huge sparse file would make it never end. Anything else is one `InputError` line.
 
 A write goes to a hidden temporary name beside the target and is renamed over it when complete, so
 a reader never sees half a file. Any OS failure (read-only folder, a file where a folder should be,
@@ -11,28 +17,88 @@ import errno
 import hashlib
 import json
 import os
+import stat
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from hexbench.errors import OutputError
+from hexbench.errors import InputError, OutputError
 
 _REASONS = {errno.EROFS: "read-only file system", errno.EACCES: "permission denied", errno.EPERM: "permission denied",
             errno.ENOTDIR: "a path component is a file, not a folder", errno.EISDIR: "is a folder",
             errno.ENAMETOOLONG: "file name too long", errno.ENOSPC: "no space left on device",
-            errno.EDQUOT: "disk quota exceeded", errno.EEXIST: "exists and is not a folder"}
+            errno.EDQUOT: "disk quota exceeded", errno.EEXIST: "exists and is not a folder",
+            errno.ENOENT: "no such file", errno.ELOOP: "too many levels of symbolic links"}
+READ_BLOCK_BYTES = 1 << 20
 
 
 def os_reason(error: OSError) -> str:
     return _REASONS.get(error.errno, error.strerror or type(error).__name__)
 
 
-def sha256_file(path: str | Path) -> str:
+def sha256_file(path: str | Path, max_bytes: int | None = None) -> str:
+    """The sha256 of a file's bytes; with `max_bytes`, of a plain file of at most that many bytes
+    (InputError otherwise, before anything is hashed)."""
     digest = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            digest.update(block)
+    if max_bytes is None:
+        with open(path, "rb") as f:
+            for block in iter(lambda: f.read(READ_BLOCK_BYTES), b""):
+                digest.update(block)
+        return digest.hexdigest()
+    for block in _plain_file_blocks(path, max_bytes, "file"):
+        digest.update(block)
     return digest.hexdigest()
+
+
+def read_bytes_bounded(path: str | Path, max_bytes: int, what: str = "file") -> bytes:
+    """The bytes of `path` if it is a plain file of at most `max_bytes` bytes; InputError (one line
+    naming the path and the `what` it should be) if it is missing, unreadable, a folder, a pipe, a
+    device or a socket, or larger."""
+    return b"".join(_plain_file_blocks(path, max_bytes, what))
+
+
+def read_json_bounded(path: str | Path, max_bytes: int, what: str = "JSON file"):
+    """`read_bytes_bounded`, parsed as JSON; InputError if it is not valid JSON (nesting too deep
+    for the parser included)."""
+    data = read_bytes_bounded(path, max_bytes, what)
+    try:
+        return json.loads(data)
+    except (ValueError, RecursionError) as e:  # JSONDecodeError and UnicodeDecodeError are ValueErrors
+        reason = "nested too deeply" if isinstance(e, RecursionError) else str(e).split("\n")[0][:200]
+        raise InputError(f"{path}: not valid JSON ({reason})") from None
+
+
+def _plain_file_blocks(path: str | Path, max_bytes: int, what: str) -> Iterator[bytes]:
+    """The blocks of a plain file of at most `max_bytes` bytes. Opened without blocking (opening a
+    pipe to read would wait for a writer) and checked on the open descriptor, so what is read is
+    what was checked; a file that grows past the bound while it is read is refused too."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | os.O_CLOEXEC)
+    except OSError as e:
+        raise InputError(f"{path}: cannot be read ({os_reason(e)})") from None
+    try:
+        status = os.fstat(fd)
+        if not stat.S_ISREG(status.st_mode):
+            kind = "a folder" if stat.S_ISDIR(status.st_mode) else "a pipe" if stat.S_ISFIFO(status.st_mode) \
+                else "a device" if stat.S_ISCHR(status.st_mode) or stat.S_ISBLK(status.st_mode) else "not a plain file"
+            raise InputError(f"{path}: is {kind}; a {what} must be a plain file")
+        if status.st_size > max_bytes:
+            raise InputError(f"{path}: {status.st_size:,} bytes; a {what} has at most {max_bytes:,}")
+        os.set_blocking(fd, True)
+        total = 0
+        while True:
+            try:
+                block = os.read(fd, READ_BLOCK_BYTES)
+            except OSError as e:
+                raise InputError(f"{path}: cannot be read ({os_reason(e)})") from None
+            if not block:
+                return
+            total += len(block)
+            if total > max_bytes:
+                raise InputError(f"{path}: grew past {max_bytes:,} bytes while read; a {what} has at most {max_bytes:,}")
+            yield block
+    finally:
+        os.close(fd)
 
 
 def sha256_bytes(data: bytes) -> str:

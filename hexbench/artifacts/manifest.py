@@ -12,14 +12,14 @@ sha256 a record names (`entries_by_sha256`, lenient: a missing or broken manifes
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
-from hexbench.artifacts.files import sha256_file, write_json_atomic
-from hexbench.errors import HexbenchError
+from hexbench.artifacts.files import read_json_bounded, sha256_file, write_json_atomic
+from hexbench.errors import HexbenchError, InputError
 
 MANIFEST_NAME = "manifest.json"
 FORMAT = 1
+MAX_MANIFEST_BYTES = 4 << 20  # a manifest of a few hundred entries is tens of kB; larger is refused unread
 NOTE = ("shipped baseline weights: policy state_dict only (SB3 zip without pickled data); "
         "written by `hexbench checkpoints publish`")
 
@@ -38,11 +38,9 @@ def read_manifest(checkpoints_dir: Path) -> dict:
     if not path.is_file():
         raise CheckpointError(f"{path}: no checkpoint manifest")
     try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as e:
-        raise CheckpointError(f"{path}: cannot be read ({e})") from None
-    except json.JSONDecodeError as e:
-        raise CheckpointError(f"{path}: not valid JSON ({e.msg} at line {e.lineno})") from None
+        data = read_json_bounded(path, MAX_MANIFEST_BYTES, "checkpoint manifest")
+    except InputError as e:
+        raise CheckpointError(str(e)) from None
     if not isinstance(data, dict) or not isinstance(data.get("checkpoints"), dict):
         raise CheckpointError(f"{path}: has no 'checkpoints' table")
     return data

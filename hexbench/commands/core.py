@@ -114,18 +114,13 @@ ISOLATION_HELP = ("controller isolation: auto (bubblewrap where it works, else p
                   "or none (in-process, debugging only; the leaderboard refuses such records)")
 
 
-def _check_files(files: list[str]) -> list[str]:
-    """Each name must be an existing file; problems are one line each (the other files still run)."""
-    from pathlib import Path
+def _split_files(files: list[str]) -> tuple[list[str], list[str]]:
+    """(the names that are controller files, a one-line problem for each of the others): the
+    others are reported and the rest still run (`controller_file_problem`)."""
+    from hexbench.suite.controller import controller_file_problem
 
-    problems = []
-    for f in files:
-        p = Path(f)
-        if p.is_dir():
-            problems.append(f"{f}: is a folder; expected a controller file (.py) defining make_controller(task)")
-        elif not p.is_file():
-            problems.append(f"{f}: no such controller file")
-    return problems
+    problems = {f: controller_file_problem(f) for f in files}
+    return [f for f in files if not problems[f]], [p for p in problems.values() if p]
 
 
 def _register_run(app: typer.Typer) -> None:
@@ -184,11 +179,10 @@ def _register_run(app: typer.Typer) -> None:
             except ImportError:
                 err.print("note: episode recording is not available in this install; running with --no-record")
                 record = False
-        failed = 0
-        for problem in _check_files(files):
+        runnable, problems = _split_files(files)
+        for problem in problems:
             typer.echo(f"error: {problem}", err=True)
-            failed += 1
-        runnable = [f for f in files if Path(f).is_file()]
+        failed = len(problems)
         if runnable and engine != "local":
             try:
                 run_engine.connect()
@@ -250,11 +244,11 @@ def _register_run(app: typer.Typer) -> None:
         except (ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2)
-        failed = 0
-        for problem in _check_files(files):
+        checkable, problems = _split_files(files)
+        for problem in problems:
             typer.echo(f"error: {problem}", err=True)
-            failed += 1
-        for f in [f for f in files if Path(f).is_file()]:
+        failed = len(problems)
+        for f in checkable:
             try:
                 for terrain_name in suite.terrains:
                     task = suite.task(terrain_name, suite.levels(terrain_name)[0])

@@ -30,7 +30,7 @@ from hexbench.artifacts.records import episode_record_rows, episodes_digest, val
 from hexbench.errors import HexbenchError, OutputError
 from hexbench.evaluation import engines, sandbox
 from hexbench.evaluation.episode import EpisodeJob, first_row_difference, replay_row
-from hexbench.suite.controller import ControllerError
+from hexbench.suite.controller import ControllerError, controller_file_problem
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedSet, run_secret
 from hexbench.suite.tasks import TaskSpec
@@ -111,7 +111,7 @@ def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: 
                 shown = str(path.relative_to(Path.cwd()))
             except ValueError:
                 shown = str(path)
-            files[shown] = {"path": shown, "sha256": sha256_file(path)}
+            files[shown] = {"path": shown, "sha256": sha256_file(path, max_bytes=limits.address_space_bytes)}
         used[task.terrain] = [files[k] for k in sorted(files)]
     return used
 
@@ -220,8 +220,9 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     command = command or " ".join(["hexbench"] + sys.argv[1:])
     mode = sandbox.resolve_isolation(isolation)
     limits = sandbox.Limits(make_timeout_s=make_timeout_s)
-    if not Path(controller_file).is_file():
-        raise ControllerError(f"{controller_file}: no such controller file")
+    problem = controller_file_problem(controller_file)
+    if problem:
+        raise ControllerError(problem)
     created = _prepare_out(out)
     written: list[Path] = []
     try:

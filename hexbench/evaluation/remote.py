@@ -95,10 +95,15 @@ class RemoteController:
             path = Path(declared) if Path(declared).is_absolute() else folder / declared
             path = path.resolve()
             ok = folder in path.parents and path.is_file()
+            size_bytes = path.stat().st_size if ok else 0
         except (ValueError, OSError, TypeError):  # a NUL byte, a name too long, not a string
             ok = False
         if not ok:
             raise self.process._fail(f"checkpoint path {declared!r} is not a file in the controller's folder", "")
+        limit = self.process.limits.address_space_bytes
+        if size_bytes > limit:  # the evaluator hashes every weights file: a huge (sparse) one would never end
+            raise self.process._fail(f"checkpoint path {declared!r} is {size_bytes:,} bytes, more than the "
+                                     f"controller process's address space ({limit:,} bytes) could load", "")
         return path
 
     def reset(self, seed: int) -> None:

@@ -24,8 +24,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from hexbench.artifacts.records import RESULT_SCHEMA, episodes_digest
-from hexbench.errors import HexbenchError
+from hexbench.artifacts.records import RESULT_SCHEMA, episodes_digest, read_record_json
+from hexbench.errors import HexbenchError, InputError
 from hexbench.replay.verify import same_up_to_round_off, summaries_from_rows, summary_disagreement
 from hexbench.suite import scoring
 from hexbench.suite.tasks import DEFAULT_PROTOCOL, Suite, format_level, load_suite
@@ -311,11 +311,9 @@ def reported_rows(record: dict, where: str) -> list[Row]:
 # ------------------------------------------------------------------------------- reading
 def read_record(path: Path) -> dict:
     try:
-        record = json.loads(Path(path).read_text())
-    except FileNotFoundError:
-        raise RecordError(f"{path}: no such file") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as e:
-        raise RecordError(f"{path}: not JSON: {e}") from None
+        record = read_record_json(path)
+    except InputError as e:
+        raise RecordError(str(e)) from None
     if not isinstance(record, dict):
         raise RecordError(f"{path}: not a result record (a JSON object is expected, found {type(record).__name__})")
     return record

@@ -19,8 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.artifacts.records import episodes_digest, validate_record
-from hexbench.errors import HexbenchError
+from hexbench.artifacts.action_log import MAX_FILE_BYTES as MAX_ACTION_LOG_BYTES
+from hexbench.artifacts.files import read_bytes_bounded
+from hexbench.artifacts.records import episodes_digest, read_record_json, validate_record
+from hexbench.errors import HexbenchError, InputError
 from hexbench.evaluation import engines
 from hexbench.evaluation.episode import first_row_difference, replay_row
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
@@ -49,11 +51,9 @@ def read_run_record(run_dir: Path) -> dict:
     if not Path(run_dir).is_dir():
         raise VerifyError(f"{run_dir}: no such run folder")
     try:
-        record = json.loads(path.read_text())
-    except OSError as e:
-        raise VerifyError(f"{path}: cannot be read ({e.strerror or e}); is {run_dir} a run folder?") from None
-    except ValueError as e:
-        raise VerifyError(f"{path}: not valid JSON ({e})") from None
+        record = read_record_json(path)
+    except InputError as e:
+        raise VerifyError(f"{e}; is {run_dir} a run folder?") from None
     try:
         validate_record(record)
     except Exception as e:  # noqa: BLE001 - jsonschema's ValidationError, one line
@@ -182,9 +182,12 @@ def _log_bytes(log_dir: Path, row: dict) -> bytes | None:
     """The bytes of a row's action log, to ship to a Ray node (None if it has none: the replay says so)."""
     name = row.get("action_log_path")
     path = log_dir / str(name)
-    if not name or Path(str(name)).name != name or not path.is_file():
+    if not name or Path(str(name)).name != name:
         return None
-    return path.read_bytes()
+    try:
+        return read_bytes_bounded(path, MAX_ACTION_LOG_BYTES, "action log")
+    except InputError:
+        return None
 
 
 def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random.Generator | None = None,

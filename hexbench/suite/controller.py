@@ -63,6 +63,31 @@ class ControllerError(HexbenchError):
     """A submitted controller misbehaved; the message is one line naming file and problem."""
 
 
+# A controller file is source code (weights go in files of their own, `checkpoint_paths`); the
+# evaluator hashes it before anything runs, so a larger one (a huge sparse file) is refused unread.
+MAX_CONTROLLER_FILE_BYTES = 16 << 20
+
+
+def controller_file_problem(path: str | Path) -> str | None:
+    """Why `path` cannot be a controller file (one line naming it), or None: it must be a plain
+    file of at most MAX_CONTROLLER_FILE_BYTES, not a folder, a pipe or a device."""
+    path = Path(path)
+    try:
+        if path.is_dir():
+            return f"{path}: is a folder; expected a controller file (.py) defining make_controller(task)"
+        if not path.exists():
+            return f"{path}: no such controller file"
+        if not path.is_file():
+            return f"{path}: is not a plain file (a pipe, a device or a socket); expected a controller file (.py)"
+        size_bytes = path.stat().st_size
+    except OSError as e:
+        return f"{path}: cannot be read ({e.strerror or e})"
+    if size_bytes > MAX_CONTROLLER_FILE_BYTES:
+        return (f"{path}: {size_bytes:,} bytes; a controller file has at most {MAX_CONTROLLER_FILE_BYTES:,} "
+                "(weights go in files of their own, named in checkpoint_paths)")
+    return None
+
+
 def file_sha256(path: str | Path) -> str:
     return sha256_file(path)
 
