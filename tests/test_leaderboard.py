@@ -330,6 +330,19 @@ def test_cli_add_replays_a_run_copies_it_with_its_admission_and_rebuilds(tmp_pat
     assert runner.invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--replace",
                                "--workers", "1"]).exit_code == 0
 
+    # the same run folder under another label: its episodes are already on the board
+    copied = tmp_path / "copied"
+    shutil.copytree(run, copied)
+    relabelled = json.loads((copied / "result.json").read_text())
+    relabelled["label"] = "Mine"
+    relabelled["controller"]["sha256"] = "0" * 64
+    (copied / "result.json").write_text(json.dumps(relabelled))
+    taken = runner.invoke(app, ["leaderboard", "add", str(copied), "--dir", str(board), "--workers", "1"])
+    lines = [ln for ln in taken.output.splitlines() if ln.strip()]
+    assert taken.exit_code == 1 and len(lines) == 1, taken.output
+    assert "6 of its episodes are those of" in lines[0] and "cpg.json" in lines[0] and "'cpg'" in lines[0]
+    assert not (board / "mine.json").exists()
+
     # a row edited after admission (summaries and digest recomputed too) no longer matches its admission
     forged = json.loads((board / "cpg.json").read_text())
     forged["episodes"][0]["success"] = True
@@ -378,6 +391,21 @@ def test_cli_add_refuses_a_bad_record_and_writes_nothing(tmp_path, records):
     lines = [line for line in res.output.splitlines() if line.strip()]
     assert len(lines) == 1 and "summary disagrees with its episodes" in lines[0]
     assert list(board.iterdir()) == []
+
+
+def test_build_refuses_a_committed_record_copied_under_another_label(tmp_path):
+    """A committed record copied with its admission block and relabelled proves the same episodes
+    as the original: build shows them once, under the first label, and names the copy."""
+    board = tmp_path / "leaderboard"
+    board.mkdir()
+    original = json.loads((REPO / "leaderboard" / "cpg.json").read_text())
+    (board / "cpg.json").write_text(json.dumps(original))
+    copy = dict(original, label="Not CPG")
+    (board / "not_cpg.json").write_text(json.dumps(copy))
+    result = lb.build(board, root=REPO)
+    assert len(result.errors) == 1 and "not_cpg.json" in result.errors[0]
+    assert "860 of its episodes are those of" in result.errors[0] and "'cpg'" in result.errors[0]
+    assert [row.label for row in result.board.measured] == ["cpg"]
 
 
 def test_cli_build_bad_dir_and_protocol_give_one_line(tmp_path):
@@ -690,10 +718,10 @@ def test_a_record_of_paper_table_5_tasks_is_admitted_by_replay_into_its_own_fold
     assert "| cpg | " in page.split("### slopes")[1] and "sandboxed + replayed" in page.split("### slopes")[1]
 
     # a self-consistent forgery (a success, summaries and digest recomputed) is refused by the replay
+    # (under its own label: under another, its episodes are already those of cpg-slopes.json)
     forged_run = tmp_path / "forged"
     shutil.copytree(run, forged_run)
     record = json.loads((forged_run / "result.json").read_text())
-    record["label"] = "forged"
     record["episodes"][0].update(success=True, end_reason="success", time_to_goal_s=0.5)
     units, headroom = {"slopes": "deg"}, {("slopes", 10.0): False}
     record["levels"] = summarize_levels(record["episodes"], units, headroom)
@@ -701,8 +729,13 @@ def test_a_record_of_paper_table_5_tasks_is_admitted_by_replay_into_its_own_fold
     record["episodes_digest"] = episodes_digest(record["episodes"])
     (forged_run / "result.json").write_text(json.dumps(record))
     with pytest.raises(lb.RecordError, match="refused: .*success: recorded"):
-        lb.add(forged_run, board, workers=1)
+        lb.add(forged_run, board, replace=True, workers=1)
     assert sorted(p.name for p in (board / "courses" / "table5").iterdir()) == ["cpg-slopes.json"]
+    assert json.loads(dest.read_text()) == entry
+    record["label"] = "forged"
+    (forged_run / "result.json").write_text(json.dumps(record))
+    with pytest.raises(lb.RecordError, match="2 of its episodes are those of .*cpg-slopes.json"):
+        lb.add(forged_run, board, workers=1)
 
     # a record of levels outside Table 5 (slopes 6) is no Table 5 record and not a full run: refused
     other = tmp_path / "other"

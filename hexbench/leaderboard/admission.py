@@ -29,6 +29,7 @@ from hexbench.leaderboard.generate import GENERATED_FILES, write_all_atomically
 from hexbench.leaderboard.records import (
     TIER_ORDER,
     TIER_SELF_REPORTED,
+    EpisodeClaims,
     MissingEpisodesError,
     RecordError,
     Row,
@@ -103,6 +104,20 @@ def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest:
             raise RecordError(f"{where}: label {clash[0]!r} is already used by {path}; choose another label")
 
 
+def _check_episodes_are_new(record: dict, board: Path, dest: Path, where: str) -> None:
+    """RecordError if one of the record's episodes is already on the board (main table, courses,
+    Table 5) under another label: the same action log (EpisodeClaims)."""
+    claims = EpisodeClaims()
+    for folder in (board, board / COURSES_DIR, board / COURSES_DIR / TABLE5_DIR):
+        if folder.is_dir():
+            for path, other in _other_records(folder, dest, record["protocol"]):
+                try:
+                    claims.claim(other, str(path))
+                except RecordError:  # a clash already on the board is `leaderboard build`'s to report
+                    continue
+    claims.claim(record, where)
+
+
 def _check_table5_terrains_are_free(row: Row, record: dict, directory: Path, dest: Path, where: Path) -> None:
     """On Table 5's page a label appears once per terrain: RecordError if another record of the same
     label and protocol in `directory` covers one of this record's terrains."""
@@ -138,7 +153,7 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
     """Validate a record, replay its run (measured records), and copy it into `directory` as
     <slug(label)>.json; RecordError if refused."""
     result_path, run_dir = _admission_source(Path(result_path))
-    directory = Path(directory)
+    directory = board = Path(directory)
     record = read_record(result_path)
     table5 = is_table5_record(record)
     if is_course_record(record) or table5:  # extra courses and Table 5 are scored apart, in folders of their own
@@ -174,6 +189,7 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
         _check_labels_are_free(rows, record, directory, dest, result_path)
     if dest.exists() and dest.resolve() != result_path.resolve() and not replace:
         raise RecordError(f"{dest} already exists; pass --replace to overwrite it")
+    _check_episodes_are_new(record, board, dest, str(result_path))
     if record["kind"] == "measured":
         record = admit(record, run_dir, str(result_path), sample=sample, workers=workers, seed_set=seed_set,
                        progress=progress)

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from hexbench.leaderboard.formatting import fmt_num, fmt_trust
 from hexbench.leaderboard.markdown import md_code, md_success_cell, md_table, md_text
-from hexbench.leaderboard.records import LoadResult, RecordError, Row, measured_row, read_record, record_files
+from hexbench.leaderboard.records import EpisodeClaims, LoadResult, RecordError, Row, measured_row, read_record, record_files
 from hexbench.suite.tasks import DEFAULT_PROTOCOL, Suite, format_level, load_suite
 
 COURSES_DIR = "courses"  # records of the extra courses (the mixed course), scored apart
@@ -35,15 +35,18 @@ def is_course_record(record: dict) -> bool:
     return bool(terrains) and terrains <= set(suite.extra_terrains)
 
 
-def load_course_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
+def load_course_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL, claims: EpisodeClaims | None = None) -> LoadResult:
     result = LoadResult([], [], [])
+    claims = EpisodeClaims() if claims is None else claims
     for path in record_files(directory):
         try:
             record = read_record(path)
             if record.get("protocol") != protocol:
                 result.skipped.append(f"{path}: protocol {record.get('protocol')!r}, not {protocol!r}")
                 continue
-            result.rows.append(measured_row(record, str(path), course=True))
+            row = measured_row(record, str(path), course=True)
+            claims.claim(record, str(path))
+            result.rows.append(row)
         except RecordError as e:
             result.errors.append(str(e))
     return result
@@ -79,16 +82,19 @@ def table5_file_name(label_slug: str, row: Row) -> str:
     return f"{label_slug}-{'-'.join(sorted({t['terrain'] for t in row.terrains}))}.json"
 
 
-def load_table5_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
+def load_table5_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL, claims: EpisodeClaims | None = None) -> LoadResult:
     """Records of Table 5's tasks: some levels of slopes and stairs, every seed of each level."""
     result = LoadResult([], [], [])
+    claims = EpisodeClaims() if claims is None else claims
     for path in record_files(directory):
         try:
             record = read_record(path)
             if record.get("protocol") != protocol:
                 result.skipped.append(f"{path}: protocol {record.get('protocol')!r}, not {protocol!r}")
                 continue
-            result.rows.append(table5_row(record, str(path)))
+            row = table5_row(record, str(path))
+            claims.claim(record, str(path))
+            result.rows.append(row)
         except RecordError as e:
             result.errors.append(str(e))
     return result

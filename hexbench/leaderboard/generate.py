@@ -16,7 +16,7 @@ from hexbench.leaderboard.courses import COURSES_DIR, TABLE5_DIR, load_course_ro
 from hexbench.leaderboard.html_page import render_html
 from hexbench.leaderboard.ranking import Board, make_board
 from hexbench.leaderboard.readme import render_readme
-from hexbench.leaderboard.records import RecordError, load_rows
+from hexbench.leaderboard.records import EpisodeClaims, RecordError, load_rows
 from hexbench.leaderboard.seeds import SEEDS_DIR, aggregate, improvements, load_seed_runs, reference_runs
 from hexbench.leaderboard.seeds_page import SEEDS_PAGE_DIR, render_seeds_page
 from hexbench.leaderboard.table_csv import render_csv
@@ -71,7 +71,8 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
     if not directory.is_dir():
         raise RecordError(f"{directory}: no such leaderboard directory")
     load_suite(protocol)  # ValueError naming the valid protocols
-    load = load_rows(directory, protocol)
+    claims = EpisodeClaims()  # one run's episodes show under one label, across the pages
+    load = load_rows(directory, protocol, claims)
     root = directory.resolve().parent if root is None else Path(root)
     board = make_board(load, protocol, root)
     texts = render_all(board)
@@ -79,12 +80,12 @@ def build(directory: str | Path = "leaderboard", protocol: str = DEFAULT_PROTOCO
     errors, skipped = list(load.errors), list(load.skipped)
     courses = directory / COURSES_DIR
     if courses.is_dir():
-        course_load = load_course_rows(courses, protocol)
+        course_load = load_course_rows(courses, protocol, claims)
         errors += course_load.errors
         skipped += course_load.skipped
         table5 = None
         if (courses / TABLE5_DIR).is_dir():
-            table5_load = load_table5_rows(courses / TABLE5_DIR, protocol)
+            table5_load = load_table5_rows(courses / TABLE5_DIR, protocol, claims)
             errors += table5_load.errors
             skipped += table5_load.skipped
             table5 = table5_load.rows

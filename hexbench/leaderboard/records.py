@@ -83,6 +83,38 @@ class LoadResult:
     skipped: list[str]  # one line per record of another protocol
 
 
+class EpisodeClaims:
+    """Which label shows each episode already, by the sha256 of its action log: the episodes of one
+    run join the leaderboard under one label.
+
+    A log's header names its episode (task, index, seed) and holds every action, so two records
+    share a log only if the same actions played the same episode: one run, or one controller's
+    behaviour, shown twice. Replay proves the episodes, not which code made them; this stops a
+    copy of someone's run folder (or of a committed record with its admission block) from joining
+    under another name. Records of the same label may share episodes (a Table 5 record and the
+    main table's record of one controller)."""
+
+    def __init__(self):
+        self.owner: dict[str, tuple[str, str]] = {}  # action-log sha256 -> (label, where)
+
+    def claim(self, record: dict, where: str) -> None:
+        """Take the episodes of a measured record; RecordError (nothing taken) if one of them is
+        already shown under another label."""
+        if record.get("kind") != "measured":
+            return
+        label = record.get("label")
+        logs = [row.get("action_log_sha256") for row in record.get("episodes", [])]
+        logs = [sha for sha in logs if isinstance(sha, str)]
+        for sha in logs:
+            other = self.owner.get(sha)
+            if other is not None and other[0] != label:
+                shared = sum(self.owner.get(s, ("", ""))[0] == other[0] for s in logs)
+                raise RecordError(f"{where}: {shared} of its episodes are those of {other[1]} (label {other[0]!r}): the "
+                                  f"same action logs; a run joins the leaderboard under one label")
+        for sha in logs:
+            self.owner.setdefault(sha, (label, where))
+
+
 # ------------------------------------------------------------------------------ validation
 @lru_cache(maxsize=1)
 def _schema_validator():
@@ -330,9 +362,11 @@ def record_files(directory: Path) -> list[Path]:
     return sorted(p for p in Path(directory).glob("*.json") if not p.name.startswith("."))
 
 
-def load_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
-    """Every record under `directory` of `protocol`: rows of the valid ones, a line per refused one."""
+def load_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL, claims: EpisodeClaims | None = None) -> LoadResult:
+    """Every record under `directory` of `protocol`: rows of the valid ones, a line per refused one
+    (`claims`: the episodes already shown, shared with the other pages' loaders)."""
     result = LoadResult([], [], [])
+    claims = EpisodeClaims() if claims is None else claims
     labels: dict[str, str] = {}
     for path in record_files(directory):
         where = str(path)
@@ -347,6 +381,7 @@ def load_rows(directory: Path, protocol: str = DEFAULT_PROTOCOL) -> LoadResult:
                 if row.label in labels:
                     raise RecordError(f"{where}: label {row.label!r} is already used by {labels[row.label]}; "
                                       "labels must be unique")
+            claims.claim(record, where)
         except RecordError as e:
             result.errors.append(str(e))
             continue
