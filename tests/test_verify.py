@@ -178,3 +178,32 @@ def test_a_hostile_action_log_names_its_episode_at_once(run, tmp_path, how):
     report = verify_run(hostile)
     assert time.monotonic() - t0 < 30
     assert not report.ok and log.name in report.message and "episode" in report.message, report.message
+
+
+def _dropped_failure_and_doubled(record: dict) -> None:
+    """Replace episode 1 of a task by a second copy of its episode 0 (same index): with a success
+    there, the copy would count it twice."""
+    rows = record["episodes"]
+    rows[1] = dict(rows[0])
+
+
+@pytest.mark.parametrize("edit, words", [
+    (_dropped_failure_and_doubled, "appears twice"),
+    (lambda r: r["episodes"][1].update(index=7), "numbered 0..1"),
+    (lambda r: r.update(protocol="v9"), "unknown protocol 'v9'; valid protocols: v1"),
+    (lambda r: r["episodes"][0].update(progress_m=float("nan")), "progress_m is nan, not a finite number"),
+    (lambda r: r.update(episodes=[]), "holds no episodes"),
+])
+def test_rows_that_are_not_one_runs_episodes_are_one_line(run, tmp_path, edit, words):
+    """Summaries and digest recomputed: each row would replay, yet the rows are not a run's episodes."""
+    forged = _copy(run, tmp_path)
+    record = json.loads((forged / "result.json").read_text())
+    edit(record)
+    try:
+        _resummarize(record)
+    except (KeyError, ValueError):  # no summary can be made of it: the digest stays as it was
+        pass
+    (forged / "result.json").write_text(json.dumps(record))
+    res = CliRunner().invoke(app, ["verify", str(forged), "--workers", "1"])
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code == 1 and len(lines) == 1 and words in lines[0], res.output

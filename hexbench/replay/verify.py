@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import math
 import tempfile
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -127,6 +128,39 @@ def summary_disagreement(record: dict, levels: list[dict], terrains: list[dict])
             or _summaries_disagreement(record["terrains"], terrains, ("terrain",), "terrain"))
 
 
+def check_episode_set(record: dict) -> str | None:
+    """The first way in which the record's rows are not the episodes of one run: an unknown protocol
+    or task, a number that is not finite, an episode twice, or a level whose episode indices are
+    not 0..n-1 (a duplicated success would otherwise replay, and count, twice)."""
+    try:
+        suite = load_suite(record["protocol"])
+    except ValueError as e:
+        return str(e)
+    rows = record["episodes"]
+    if not rows:
+        return "the record holds no episodes"
+    first: dict[tuple, int] = {}  # (terrain, level, index) -> its row
+    for n, row in enumerate(rows):
+        try:
+            task = suite.task(row["terrain"], float(row["level"]))
+        except ValueError as e:
+            return f"episodes[{n}]: {e}"
+        name = _episode_name(row, task.unit)
+        not_finite = next((k for k, v in row.items() if isinstance(v, float) and not math.isfinite(v)), None)
+        if not_finite:
+            return f"{name}: {not_finite} is {row[not_finite]}, not a finite number"
+        key = (task.terrain, task.level, row["index"])
+        if key in first:
+            return f"{name} appears twice (episodes[{first[key]}] and episodes[{n}])"
+        first[key] = n
+    per_task = Counter((terrain, level) for terrain, level, _ in first)
+    for (terrain, level, index), n in first.items():
+        if index >= per_task[(terrain, level)]:
+            return (f"{_episode_name(rows[n], suite.task(terrain, level).unit)}: a run's episodes of a task are "
+                    f"numbered 0..{per_task[(terrain, level)] - 1}")
+    return None
+
+
 def check_summaries(record: dict) -> str | None:
     """The first way in which the record's summaries or digest do not follow from its rows."""
     rows = record["episodes"]
@@ -197,7 +231,7 @@ def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random
     record = read_run_record(run_dir)
     rows = record["episodes"]
     total = len(rows)
-    problem = check_summaries(record) or check_seeds(record, seed_set)
+    problem = check_episode_set(record) or check_summaries(record) or check_seeds(record, seed_set)
     if problem:
         return VerifyReport(False, f"{run_dir}: {problem}", 0, total)
     chosen = rows
