@@ -333,6 +333,41 @@ def test_verify_accepts_the_log_and_detects_tampering(tmp_path):
     assert res.exit_code == 1 and "corrupt MCAP file" in res.output
 
 
+def _zstd_bomb(path: Path, uncompressed_bytes: int) -> None:
+    """A small MCAP file (header, one zstd chunk of `uncompressed_bytes` zeros, footer) whose one
+    chunk declares its true uncompressed size."""
+    import zstandard
+    from mcap.data_stream import RecordBuilder
+    from mcap.records import Chunk
+    from mcap.writer import CompressionType, Writer
+
+    empty = __import__("io").BytesIO()
+    writer = Writer(empty, compression=CompressionType.NONE, use_chunking=False)
+    writer.start("hexbench", "bomb")
+    writer.finish()
+    data = empty.getvalue()
+    header_end = 8 + 9 + int.from_bytes(data[9:17], "little")  # magic, then opcode + length + header
+    builder = RecordBuilder()
+    Chunk(message_start_time=0, message_end_time=0, uncompressed_size=uncompressed_bytes, uncompressed_crc=0,
+          compression="zstd", data=zstandard.ZstdCompressor(level=3).compress(bytes(uncompressed_bytes))).write(builder)
+    path.write_bytes(data[:header_end] + builder.end() + data[header_end:])
+
+
+@pytest.mark.parametrize("command", [["verify"], ["replay", "--summary"]])
+def test_a_decompression_bomb_is_refused_before_decompressing(tmp_path, command):
+    """A shared episode file whose chunk inflates far past any episode is one line, read in moments."""
+    from hexbench.recording.reader import MAX_CHUNK_UNCOMPRESSED_BYTES
+
+    bomb = tmp_path / "bomb.mcap"
+    _zstd_bomb(bomb, MAX_CHUNK_UNCOMPRESSED_BYTES + 1)
+    assert bomb.stat().st_size < 100_000
+    t0 = time.monotonic()
+    res = CliRunner().invoke(app, [command[0], str(bomb), *command[1:]])
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert time.monotonic() - t0 < 5
+    assert res.exit_code == 1 and len(lines) == 1 and "bytes uncompressed" in lines[0], res.output
+
+
 def test_episode_commands(tmp_path):
     from hexbench.evaluation.evaluate import evaluate
 

@@ -1,19 +1,56 @@
-"""Reading an episode's MCAP file back: integrity check, metadata, messages, a text summary."""
+"""Reading an episode's MCAP file back: integrity check, metadata, messages, a text summary.
+
+Episode files travel (the rollout dataset), so every read goes through `open_episode_file`: a
+plain file of at most MAX_EPISODE_FILE_BYTES, read whole, whose compressed chunks each declare
+at most MAX_CHUNK_UNCOMPRESSED_BYTES before any is decompressed (a 100 kB file can hold a zstd
+chunk of gigabytes of zeros, which the MCAP reader would otherwise allocate and then walk as
+millions of empty records).
+"""
 
 from __future__ import annotations
 
+import io
 import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from hexbench.errors import HexbenchError
+from hexbench.artifacts.files import read_bytes_bounded
+from hexbench.errors import HexbenchError, InputError
 from hexbench.world.robot import LEG_NAMES
+
+# A recorded episode is about 0.7 kB per control step uncompressed (1.2 MB for 1,721 steps, 0.19 MB
+# on disk): these bounds leave some 20 times the longest protocol episode (4,000 steps).
+MAX_EPISODE_FILE_BYTES = 64 << 20
+MAX_CHUNK_UNCOMPRESSED_BYTES = 64 << 20
 
 
 class EpisodeFileError(HexbenchError):
     """An episode file is missing, unreadable or fails its CRC checks (one-line message)."""
+
+
+def open_episode_file(path: str | Path) -> io.BytesIO:
+    """The bytes of an episode file, for the MCAP reader, once the file is a plain file within
+    MAX_EPISODE_FILE_BYTES and no chunk declares more than MAX_CHUNK_UNCOMPRESSED_BYTES;
+    EpisodeFileError (one line) otherwise."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    try:
+        data = read_bytes_bounded(path, MAX_EPISODE_FILE_BYTES, "episode file")
+    except InputError as e:
+        raise EpisodeFileError(str(e)) from None
+    try:
+        for record in StreamReader(io.BytesIO(data), emit_chunks=True).records:
+            if isinstance(record, Chunk) and record.uncompressed_size > MAX_CHUNK_UNCOMPRESSED_BYTES:
+                raise EpisodeFileError(f"{path}: a chunk declares {record.uncompressed_size:,} bytes uncompressed; "
+                                       f"an episode file's chunks hold at most {MAX_CHUNK_UNCOMPRESSED_BYTES:,}")
+    except EpisodeFileError:
+        raise
+    except Exception as e:  # noqa: BLE001 - any decoder failure means the file is unusable
+        raise EpisodeFileError(f"{path}: corrupt MCAP file ({type(e).__name__}: {e})") from None
+    return io.BytesIO(data)
 
 
 @dataclass(frozen=True)
@@ -34,10 +71,10 @@ def check_integrity(path: str | Path) -> None:
     path = Path(path)
     if not path.is_file():
         raise EpisodeFileError(f"{path}: no such episode file")
+    f = open_episode_file(path)
     try:
-        with open(path, "rb") as f:
-            for _ in StreamReader(f, validate_crcs=True).records:
-                pass
+        for _ in StreamReader(f, validate_crcs=True).records:
+            pass
     except (McapError, ValueError, EOFError, OSError) as e:
         raise EpisodeFileError(f"{path}: corrupt MCAP file ({type(e).__name__}: {e})") from None
     except Exception as e:  # noqa: BLE001 - any decoder failure means the file is unusable
@@ -50,7 +87,7 @@ def read_episode(path: str | Path, validate: bool = True) -> EpisodeLog:
     path = Path(path)
     if validate:
         check_integrity(path)
-    with open(path, "rb") as f:
+    with open_episode_file(path) as f:
         reader = make_reader(f, validate_crcs=True)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         summary = reader.get_summary()
@@ -69,7 +106,7 @@ def iter_topic(path: str | Path, topic: str):
     """(log_time_ns, data bytes) of one topic in log-time order."""
     from mcap.reader import make_reader
 
-    with open(path, "rb") as f:
+    with open_episode_file(path) as f:
         for _, _, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[topic], log_time_order=True):
             yield msg.log_time, msg.data
 
@@ -83,7 +120,7 @@ def all_messages(path: str | Path) -> dict[str, list[tuple[int, bytes]]]:
     from mcap.reader import make_reader
 
     out: dict[str, list[tuple[int, bytes]]] = {}
-    with open(path, "rb") as f:
+    with open_episode_file(path) as f:
         for _, channel, msg in make_reader(f, validate_crcs=True).iter_messages(log_time_order=True):
             out.setdefault(channel.topic, []).append((msg.log_time, msg.data))
     return out

@@ -15,13 +15,13 @@ from pathlib import Path
 
 import numpy as np
 
-from hexbench.recording.reader import EpisodeFileError, iter_topic, read_episode
+from hexbench.recording.reader import EpisodeFileError, iter_topic, open_episode_file, read_episode
 
 
 def _attachment(path: Path, name: str) -> bytes:
     from mcap.reader import make_reader
 
-    with open(path, "rb") as f:
+    with open_episode_file(path) as f:
         for a in make_reader(f, validate_crcs=True).iter_attachments():
             if a.name == name:
                 return a.data
