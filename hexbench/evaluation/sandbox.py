@@ -210,8 +210,8 @@ class ControllerProcess:
 
     def _stderr_tail(self) -> str:
         try:
-            self._stderr.seek(0)
-            lines = [line.strip() for line in self._stderr.read()[-4000:].decode(errors="replace").splitlines()]
+            self._stderr.seek(max(0, os.fstat(self._stderr.fileno()).st_size - 4000))  # up to 64 MiB written
+            lines = [line.strip() for line in self._stderr.read(4000).decode(errors="replace").splitlines()]
         except (OSError, ValueError):
             return ""
         lines = [line for line in lines if line]
