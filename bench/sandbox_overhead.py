@@ -2,7 +2,8 @@
 
     python bench/sandbox_overhead.py                       # PPO-CPG, 6 levels x 4 episodes, 2 workers, 3 rounds
     python bench/sandbox_overhead.py --controller baselines/cpg.py --episodes 2 --rounds 1
-    python bench/sandbox_overhead.py --per-step                 # one pinned worker: act() apart from the rest
+    python bench/sandbox_overhead.py --per-step                 # one pinned worker: act() apart from the rest,
+    #                                                             and each process's CPU, switches and faults per step
     python bench/sandbox_overhead.py --per-step --cores 2       # the same on two cores at once, as `hexbench run` loads them
 
 The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
@@ -26,6 +27,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import statistics
 import tempfile
 import time
@@ -106,9 +108,38 @@ class _TimedActor:
         return action
 
 
+def process_tree_counters(pid: int) -> dict[str, float]:
+    """CPU time [s], context switches (voluntary: it blocked; involuntary: it was preempted) and
+    minor page faults of a process and everything below it, from /proc."""
+    totals = {"cpu_s": 0.0, "voluntary_switches": 0, "involuntary_switches": 0, "minor_faults": 0}
+    pending, ticks = [pid], os.sysconf("SC_CLK_TCK")
+    while pending:
+        current = pending.pop()
+        try:
+            fields = Path(f"/proc/{current}/stat").read_text().rsplit(")", 1)[1].split()
+            status = dict(line.split(":", 1) for line in Path(f"/proc/{current}/status").read_text().splitlines())
+            for tid in os.listdir(f"/proc/{current}/task"):
+                pending += [int(c) for c in Path(f"/proc/{current}/task/{tid}/children").read_text().split()]
+        except (OSError, ValueError):
+            continue
+        totals["cpu_s"] += (int(fields[11]) + int(fields[12])) / ticks
+        totals["minor_faults"] += int(fields[7])
+        totals["voluntary_switches"] += int(status["voluntary_ctxt_switches"])
+        totals["involuntary_switches"] += int(status["nonvoluntary_ctxt_switches"])
+    return totals
+
+
+def _own_counters() -> dict[str, float]:
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return {"cpu_s": usage.ru_utime + usage.ru_stime, "voluntary_switches": usage.ru_nvcsw,
+            "involuntary_switches": usage.ru_nivcsw, "minor_faults": usage.ru_minflt}
+
+
 def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000, 1001)) -> list[dict]:
     """One worker pinned to one core, episodes of rough 3 cm: per control step, the act() round trip
-    and the rest of the step (physics, checks) [us], after one untimed episode."""
+    and the rest of the step (physics, checks) [us], after one untimed episode; and per control step
+    the evaluator's and (sandboxed) the controller process's CPU time [us], context switches and
+    minor page faults."""
     from hexbench.suite.rollout import play
 
     task = load_suite("v1").task("rough", 3.0)
@@ -117,13 +148,18 @@ def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000,
         ctrl = sandbox.controller_for(controller, task, isolation)
         play(task, seeds[0], _TimedActor(ctrl), controller_seed=5)
         out = []
+        child = getattr(getattr(ctrl, "process", None), "proc", None)
         for seed in seeds:
             actor = _TimedActor(ctrl)
+            before = [_own_counters()] + ([process_tree_counters(child.pid)] if child else [])
             t0 = time.perf_counter()
             steps = play(task, seed, actor, controller_seed=5).row["steps"]
             total = time.perf_counter() - t0
+            after = [_own_counters()] + ([process_tree_counters(child.pid)] if child else [])
+            counts = [{k: (b[k] - a[k]) / steps * (1e6 if k == "cpu_s" else 1) for k in a} for a, b in zip(before, after)]
             out.append({"seed": seed, "steps": steps, "step_us": total / steps * 1e6, "act_us": actor.act_s / steps * 1e6,
-                        "rest_us": (total - actor.act_s) / steps * 1e6})
+                        "rest_us": (total - actor.act_s) / steps * 1e6, "evaluator_per_step": counts[0],
+                        "controller_process_per_step": counts[1] if child else None})
         sandbox.close_all()
     finally:
         if previous is not None:
@@ -155,7 +191,11 @@ def report_per_step(controller: str, cores: int) -> None:
         for isolation, r in rounds:
             steps.setdefault(isolation, []).append(r["step_us"])
             print(f"core slot {core} {isolation:<10} seed {r['seed']}: {r['steps']} steps, {r['step_us']:.0f} us per step: "
-                  f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us", flush=True)
+                  f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us; "
+                  + "; ".join(f"{who} CPU {c['cpu_s']:.0f} us, switches {c['voluntary_switches']:.2f} voluntary "
+                              f"{c['involuntary_switches']:.2f} involuntary, {c['minor_faults']:.2f} faults"
+                              for who, c in (("evaluator", r["evaluator_per_step"]),
+                                             ("controller", r["controller_process_per_step"])) if c), flush=True)
     sandboxed, in_process = statistics.median(steps[mode]), statistics.median(steps["none"])
     print(f"median per control step: {mode} {sandboxed:.0f} us, in-process {in_process:.0f} us, "
           f"ratio {sandboxed / in_process:.3f} ({cores} core{'s' if cores > 1 else ''} busy)")
