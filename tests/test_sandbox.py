@@ -271,7 +271,7 @@ def test_a_pipe_or_a_huge_controller_file_is_one_line_and_the_others_still_run(t
     assert time.monotonic() - t0 < 60
     errors = [ln for ln in res.output.splitlines() if ln.startswith("error: ")]
     assert res.exit_code == 1 and len(errors) == 2, res.output
-    assert "pipe.py: is not a plain file" in errors[0] and "huge.py: 16,777,217 bytes" in errors[1]
+    assert "pipe.py: is a pipe; expected a controller file" in errors[0] and "huge.py: 16,777,217 bytes" in errors[1]
     assert (tmp_path / "o" / "cpg" / "result.json").is_file()
     assert not (tmp_path / "o" / "pipe").exists() and not (tmp_path / "o" / "huge").exists()
 

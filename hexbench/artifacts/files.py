@@ -68,6 +68,16 @@ def read_json_bounded(path: str | Path, max_bytes: int, what: str = "JSON file")
         raise InputError(f"{path}: not valid JSON ({reason})") from None
 
 
+def file_kind(mode: int) -> str:
+    """What a file of this `st_mode` is, in words: "a plain file", "a folder", "a pipe", "a device",
+    "a socket" or "a special file"."""
+    for test, kind in ((stat.S_ISREG, "a plain file"), (stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a pipe"),
+                       (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return kind
+    return "a special file"
+
+
 def _plain_file_blocks(path: str | Path, max_bytes: int, what: str) -> Iterator[bytes]:
     """The blocks of a plain file of at most `max_bytes` bytes. Opened without blocking (opening a
     pipe to read would wait for a writer) and checked on the open descriptor, so what is read is
@@ -79,9 +89,7 @@ def _plain_file_blocks(path: str | Path, max_bytes: int, what: str) -> Iterator[
     try:
         status = os.fstat(fd)
         if not stat.S_ISREG(status.st_mode):
-            kind = "a folder" if stat.S_ISDIR(status.st_mode) else "a pipe" if stat.S_ISFIFO(status.st_mode) \
-                else "a device" if stat.S_ISCHR(status.st_mode) or stat.S_ISBLK(status.st_mode) else "not a plain file"
-            raise InputError(f"{path}: is {kind}; a {what} must be a plain file")
+            raise InputError(f"{path}: is {file_kind(status.st_mode)}; a {what} must be a plain file")
         if status.st_size > max_bytes:
             raise InputError(f"{path}: {status.st_size:,} bytes; a {what} has at most {max_bytes:,}")
         os.set_blocking(fd, True)

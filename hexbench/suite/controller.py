@@ -34,7 +34,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from hexbench.artifacts.files import sha256_file
+from hexbench.artifacts.files import file_kind, os_reason, sha256_file
 from hexbench.errors import HexbenchError
 from hexbench.world.env import ACTION_MODES
 
@@ -73,17 +73,16 @@ def controller_file_problem(path: str | Path) -> str | None:
     file of at most MAX_CONTROLLER_FILE_BYTES, not a folder, a pipe or a device."""
     path = Path(path)
     try:
-        if path.is_dir():
-            return f"{path}: is a folder; expected a controller file (.py) defining make_controller(task)"
-        if not path.exists():
-            return f"{path}: no such controller file"
-        if not path.is_file():
-            return f"{path}: is not a plain file (a pipe, a device or a socket); expected a controller file (.py)"
-        size_bytes = path.stat().st_size
+        status = path.stat()
+    except FileNotFoundError:
+        return f"{path}: no such controller file"
     except OSError as e:
-        return f"{path}: cannot be read ({e.strerror or e})"
-    if size_bytes > MAX_CONTROLLER_FILE_BYTES:
-        return (f"{path}: {size_bytes:,} bytes; a controller file has at most {MAX_CONTROLLER_FILE_BYTES:,} "
+        return f"{path}: cannot be read ({os_reason(e)})"
+    kind = file_kind(status.st_mode)
+    if kind != "a plain file":
+        return f"{path}: is {kind}; expected a controller file (.py) defining make_controller(task)"
+    if status.st_size > MAX_CONTROLLER_FILE_BYTES:
+        return (f"{path}: {status.st_size:,} bytes; a controller file has at most {MAX_CONTROLLER_FILE_BYTES:,} "
                 "(weights go in files of their own, named in checkpoint_paths)")
     return None
 
