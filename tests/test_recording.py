@@ -368,6 +368,29 @@ def test_a_decompression_bomb_is_refused_before_decompressing(tmp_path, command)
     assert res.exit_code == 1 and len(lines) == 1 and "bytes uncompressed" in lines[0], res.output
 
 
+def test_an_episode_index_declaring_more_than_its_bound_is_refused_before_reading(tmp_path):
+    """A shared run's episodes.parquet that would inflate far past any index is one line: its
+    metadata (rows, declared bytes) is checked before anything is decoded. 300,000 rows of one
+    repeated value take a few kB on disk."""
+    import pandas as pd
+
+    from hexbench.evaluation import evaluate as evaluate_module
+
+    run = tmp_path / "run"
+    run.mkdir()
+    pd.DataFrame({"episode_id": ["x"] * 300_000, "steps": [0] * 300_000}).to_parquet(
+        run / "episodes.parquet", compression="zstd", index=False)
+    assert (run / "episodes.parquet").stat().st_size < 100_000
+    assert evaluate_module.MAX_EPISODE_INDEX_ROWS == 100_000
+    res = CliRunner().invoke(app, ["episodes", str(run)])
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code == 2 and len(lines) == 1 and "declares 300,000 rows" in lines[0], res.output
+    assert "an episode index holds at most 100,000 rows" in lines[0]
+    (run / "episodes.parquet").write_bytes(b"PAR1 not parquet")
+    res = CliRunner().invoke(app, ["episodes", str(run)])
+    assert res.exit_code == 2 and "unreadable episode index" in res.output and "Traceback" not in res.output
+
+
 def test_episode_commands(tmp_path):
     from hexbench.evaluation.evaluate import evaluate
 

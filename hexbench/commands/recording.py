@@ -57,16 +57,17 @@ def _episodes_table(run_dir: Path):
     """The run's episode index as a DataFrame with absolute file paths (episodes.parquet, else the .mcap files)."""
     import pandas as pd
 
+    from hexbench.errors import InputError
+    from hexbench.evaluation.evaluate import read_episode_index
     from hexbench.recording.reader import EpisodeFileError, read_episode
 
     index = run_dir / "episodes.parquet"
     record_dir = run_dir / "episodes"
     if index.is_file():
         try:
-            table = pd.read_parquet(index)
-        except (OSError, ValueError) as e:  # pyarrow's errors for a damaged file are ValueErrors
-            reason = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-            _fail(f"{index}: unreadable episode index ({reason})", 2)
+            table = read_episode_index(index)
+        except InputError as e:
+            _fail(str(e), 2)
         for kind in ("mcap", "rrd"):
             col = f"{kind}_path"
             if col in table:
