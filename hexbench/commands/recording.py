@@ -22,7 +22,9 @@ def _episode_file(episode: str, suffix: str) -> Path:
     else:
         _fail(f"{episode}: expected an episode file (.mcap or .rrd)", 2)
     if not p.is_file():
-        _fail(f"{p}: no such file", 2)
+        from hexbench.artifacts.files import file_kind
+
+        _fail(f"{p}: is {file_kind(p.stat().st_mode)}; expected an episode file" if p.exists() else f"{p}: no such file", 2)
     return p
 
 
