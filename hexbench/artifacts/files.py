@@ -36,16 +36,16 @@ def os_reason(error: OSError) -> str:
     return _REASONS.get(error.errno, error.strerror or type(error).__name__)
 
 
-def sha256_file(path: str | Path, max_bytes: int | None = None) -> str:
+def sha256_file(path: str | Path, max_bytes: int | None = None, what: str = "file") -> str:
     """The sha256 of a file's bytes; with `max_bytes`, of a plain file of at most that many bytes
-    (InputError otherwise, before anything is hashed)."""
+    (InputError naming the `what` it should be otherwise, before anything is hashed)."""
     digest = hashlib.sha256()
     if max_bytes is None:
         with open(path, "rb") as f:
             for block in iter(lambda: f.read(READ_BLOCK_BYTES), b""):
                 digest.update(block)
         return digest.hexdigest()
-    for block in _plain_file_blocks(path, max_bytes, "file"):
+    for block in _plain_file_blocks(path, max_bytes, what):
         digest.update(block)
     return digest.hexdigest()
 

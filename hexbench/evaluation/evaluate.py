@@ -119,7 +119,7 @@ def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: 
                 shown = str(path.relative_to(Path.cwd()))
             except ValueError:
                 shown = str(path)
-            files[shown] = {"path": shown, "sha256": sha256_file(path, max_bytes=limits.address_space_bytes)}
+            files[shown] = {"path": shown, "sha256": sha256_file(path, limits.address_space_bytes, "weights file")}
         used[task.terrain] = [files[k] for k in sorted(files)]
     return used
 
