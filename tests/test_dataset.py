@@ -121,6 +121,24 @@ def test_failed_build_removes_its_temp_folder(tmp_path, monkeypatch):
 # ------------------------------------------------------------------------------ archives
 
 
+@pytest.mark.parametrize("manifest, words", [
+    ("[" * 100_000, "not valid JSON (nested too deeply)"),
+    ("[1, 2]", "not a terrain-images manifest"),
+    ('{"files": [{"path": "../../etc/passwd", "sha256": "0"}]}', "is not a path inside the dataset folder"),
+    (None, "is not a terrain-images build"),
+])
+def test_a_corrupt_or_hostile_manifest_is_one_line(tmp_path, manifest, words):
+    folder = tmp_path / "dataset"
+    folder.mkdir()
+    if manifest is not None:
+        (folder / "manifest.json").write_text(manifest)
+    for command in (["dataset", "verify", str(folder)], ["dataset", "preview", str(folder), "--out", str(tmp_path / "p.png")]):
+        res = CliRunner().invoke(app, command)
+        lines = [ln for ln in res.output.splitlines() if ln.strip()]
+        assert res.exit_code != 0 and len(lines) == 1 and words in lines[0], (command, res.output)
+    assert not (tmp_path / "p.png").exists()
+
+
 def test_pack_is_deterministic(tiny_build, tmp_path):
     a = pack_build(tiny_build, tmp_path / "a.tar.gz", "terrain-images-1.0.0")
     b = pack_build(tiny_build, tmp_path / "b.tar.gz", "terrain-images-1.0.0")

@@ -58,11 +58,11 @@ def register(app: typer.Typer) -> None:
     @group.command("verify")
     def verify(folder: Path = typer.Argument(..., help="a build or downloaded dataset folder")) -> None:
         """Check every file of a dataset folder against its manifest's sha256."""
-        from hexbench.perception.dataset.build import verify_build
+        from hexbench.perception.dataset.build import DatasetError, verify_build
 
         try:
             problems = verify_build(folder)
-        except FileNotFoundError as err:
+        except DatasetError as err:
             _fail(str(err))
         if problems:
             _fail(f"{folder}: {problems[0]} ({len(problems)} problem(s))")
@@ -76,12 +76,12 @@ def register(app: typer.Typer) -> None:
         import numpy as np
         from PIL import Image, ImageDraw
 
-        from hexbench.perception.dataset.build import load_manifest
+        from hexbench.perception.dataset.build import DatasetError, load_manifest
         from hexbench.perception.views import TERRAIN_CLASSES
 
         try:
             files = load_manifest(folder)["files"]
-        except FileNotFoundError as err:
+        except DatasetError as err:
             _fail(str(err))
         scale, label_w = 2, 70
         rows = []
@@ -124,7 +124,7 @@ def register(app: typer.Typer) -> None:
                 update_registry: bool = typer.Option(False, "--update-registry", help="write the entry into datasets/registry.toml")) -> None:
         """Pack a build into a deterministic .tar.gz and print its registry entry."""
         from hexbench.perception.dataset.archive import pack_build
-        from hexbench.perception.dataset.build import load_manifest, verify_build
+        from hexbench.perception.dataset.build import DatasetError, load_manifest, verify_build
         from hexbench.perception.dataset.registry import (
             REGISTRY_PATH,
             load_registry,
@@ -135,7 +135,7 @@ def register(app: typer.Typer) -> None:
         _check_name(name)
         try:
             manifest = load_manifest(build_dir)
-        except FileNotFoundError as err:
+        except DatasetError as err:
             _fail(str(err))
         problems = verify_build(build_dir)
         if problems:

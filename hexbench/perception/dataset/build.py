@@ -31,7 +31,8 @@ from typing import Callable
 
 import numpy as np
 
-from hexbench.artifacts.files import sha256_bytes, sha256_file
+from hexbench.artifacts.files import read_json_bounded, sha256_bytes, sha256_file
+from hexbench.errors import HexbenchError, InputError
 from hexbench.perception.dataset import DATASET_NAME
 from hexbench.perception.dataset.walks import WALK_KINDS, WalkConfig, plan_walks, render_walks
 from hexbench.perception.views import (
@@ -48,6 +49,7 @@ from hexbench.perception.views import (
 # --version -> the manifest's version (2.0.0 kept every walk frame; hexbench/perception/dataset/walks.py)
 DATASET_VERSIONS: dict[int, str] = {1: "1.0.0", 2: "2.1.0"}
 MANIFEST_NAME = "manifest.json"
+MAX_MANIFEST_BYTES = 64 << 20  # a manifest lists every image (a few hundred bytes each); larger is refused unread
 SPLITS: tuple[str, ...] = ("train", "test")
 SPLIT_STREAM = 1_000_003  # rng stream id for the train/test assignment
 
@@ -223,11 +225,30 @@ def view_kind_counts(files: list[dict]) -> dict:
     return out
 
 
+class DatasetError(HexbenchError):
+    """A dataset folder is not a terrain-images build, or its manifest is unreadable or malformed (one line)."""
+
+
 def load_manifest(build_dir: Path) -> dict:
+    """The manifest of a dataset folder; DatasetError unless it is a bounded JSON object whose
+    "files" are entries with a relative "path" inside the folder and a "sha256"."""
     path = Path(build_dir) / MANIFEST_NAME
     if not path.is_file():
-        raise FileNotFoundError(f"{build_dir} is not a terrain-images build: no {MANIFEST_NAME} (run `hexbench dataset build terrain-images`)")
-    return json.loads(path.read_text())
+        raise DatasetError(f"{build_dir} is not a terrain-images build: no {MANIFEST_NAME} (run `hexbench dataset build terrain-images`)")
+    try:
+        manifest = read_json_bounded(path, MAX_MANIFEST_BYTES, "dataset manifest")
+    except InputError as e:
+        raise DatasetError(str(e)) from None
+    files = manifest.get("files") if isinstance(manifest, dict) else None
+    if not isinstance(files, list) or not all(isinstance(f, dict) and isinstance(f.get("path"), str)
+                                              and isinstance(f.get("sha256"), str) for f in files):
+        raise DatasetError(f"{path}: not a terrain-images manifest (a 'files' list of entries with 'path' and "
+                           f"'sha256' is expected)")
+    for f in files:
+        parts = Path(f["path"]).parts
+        if not parts or Path(f["path"]).is_absolute() or ".." in parts or "\0" in f["path"]:
+            raise DatasetError(f"{path}: file entry {f['path'][:100]!r} is not a path inside the dataset folder")
+    return manifest
 
 
 def verify_build(build_dir: Path) -> list[str]:
