@@ -255,14 +255,14 @@ def training_overlap(sidecar: dict, root: Path, paths: list[str]) -> tuple[list[
     trained = sidecar.get("train_image_sha256")
     source = "the sidecar's train_image_sha256"
     if trained is None:
-        from hexbench.perception.dataset.build import MANIFEST_NAME
+        from hexbench.perception.dataset.build import MANIFEST_NAME, load_manifest
 
         manifest = Path(root) / MANIFEST_NAME
         recorded = (sidecar.get("dataset") or {}).get("manifest_sha256")
         if not (recorded and manifest.is_file() and sha256_file(manifest) == recorded):
             return None, ("its sidecar lists no training images and this folder is not its training dataset "
                           "(manifest sha256 differs)")
-        trained = [f["sha256"] for f in json.loads(manifest.read_text())["files"] if f.get("split") == "train"]
+        trained = [f["sha256"] for f in load_manifest(root)["files"] if f.get("split") == "train"]
         source = "the train split of its training dataset's manifest"
     trained = set(trained)
     return [p for p, h in zip(paths, image_sha256s(root, paths)) if h in trained], source
