@@ -63,15 +63,21 @@ class EpisodeLog:
     attachments: tuple[str, ...]
 
 
+def _open_existing(path: Path) -> io.BytesIO:
+    if not path.is_file():
+        raise EpisodeFileError(f"{path}: no such episode file")
+    return open_episode_file(path)
+
+
 def check_integrity(path: str | Path) -> None:
     """Read every record with CRC validation (chunks, data section, summary); EpisodeFileError if bad."""
+    _check_records(Path(path), _open_existing(Path(path)))
+
+
+def _check_records(path: Path, f: io.BytesIO) -> None:
     from mcap.exceptions import McapError
     from mcap.stream_reader import StreamReader
 
-    path = Path(path)
-    if not path.is_file():
-        raise EpisodeFileError(f"{path}: no such episode file")
-    f = open_episode_file(path)
     try:
         for _ in StreamReader(f, validate_crcs=True).records:
             pass
@@ -85,9 +91,11 @@ def read_episode(path: str | Path, validate: bool = True) -> EpisodeLog:
     from mcap.reader import make_reader
 
     path = Path(path)
-    if validate:
-        check_integrity(path)
-    with open_episode_file(path) as f:
+    f = _open_existing(path)
+    if validate:  # on the same bytes: the file is read (and its chunks' sizes checked) once
+        _check_records(path, f)
+        f.seek(0)
+    with f:
         reader = make_reader(f, validate_crcs=True)
         meta = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
         summary = reader.get_summary()
