@@ -65,6 +65,7 @@ class Case:
 
 
 TIMEOUT_WORDS = ("timeout", "timed out", "took longer", "deadline", "time limit")
+PROCESS = ("--isolation", "process")
 CASES: dict[str, Case] = {
     "attack_teleport": Case(EITHER),
     "attack_slide": Case(EITHER),
@@ -79,6 +80,12 @@ CASES: dict[str, Case] = {
     "attack_run_secret": Case(HONEST, out="runs"),
     "attack_run_secret@same-folder": Case(HONEST, out="same"),  # `hexbench run ./mine.py --out .`
     "attack_proc_parent": Case(HONEST, needs_bwrap=True),
+    # under --isolation process the controller may run as the evaluator's user (or as root): only
+    # seccomp and an evaluator that is not dumpable keep it from the evaluator's processes
+    "attack_signal_evaluator": Case(HONEST),
+    "attack_signal_evaluator@process": Case(HONEST, extra_args=PROCESS),
+    "attack_evaluator_memory": Case(HONEST),
+    "attack_evaluator_memory@process": Case(HONEST, extra_args=PROCESS),
     "attack_write_outside": Case(EITHER, needs_bwrap=True),
     "attack_overwrite_source": Case(EITHER, needs_bwrap=True),
     "attack_socket": Case(EITHER, needs_bwrap=True),

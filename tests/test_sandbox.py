@@ -371,3 +371,20 @@ def test_the_controller_process_runs_the_evaluators_own_hexbench(tmp_path, isola
                           timeout=300, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
     assert "steps 2" in done.stdout
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="capabilities are root's to drop")
+def test_a_root_controller_process_that_stays_root_keeps_no_capability():
+    """Under --isolation process a root evaluator whose Python nobody can read starts the controller
+    as root: with an empty bounding set its exec grants it no capability (no reading other users'
+    files, no tracing, no memory of a process that is not dumpable)."""
+    import subprocess
+    import sys
+
+    from hexbench.evaluation.isolation import DEFAULT_LIMITS, preexec_for
+
+    status = subprocess.run([sys.executable, "-c", "print(open('/proc/self/status').read())"], capture_output=True,
+                            text=True, check=True, preexec_fn=preexec_for(DEFAULT_LIMITS, False, True, True)).stdout
+    caps = {line.split(":")[0]: int(line.split(":")[1], 16) for line in status.splitlines() if line.startswith("Cap")}
+    assert caps["CapEff"] == caps["CapPrm"] == caps["CapBnd"] == caps["CapAmb"] == 0, caps
+    assert "Uid:\t0\t0\t0\t0" in status  # still root, without the power of root

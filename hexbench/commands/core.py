@@ -170,7 +170,7 @@ def _register_run(app: typer.Typer) -> None:
         except (ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2)
-        if mode == "process":
+        if mode == "process" and isolation == "auto":
             err.print("note: bubblewrap is not usable here; controllers run in plain child processes "
                       "(--isolation process: the file system is not hidden). Debian: apt-get install bubblewrap")
         if record:

@@ -1,8 +1,8 @@
 """The controller process: runs a submitted controller file behind the wire, nothing else.
 
 Started by `hexbench.evaluation.sandbox` as `python -I -B -m hexbench.evaluation.controller_host IN_FD OUT_FD` inside the
-sandbox. It first forbids itself new processes and network sockets (seccomp, where libseccomp is
-available: a filter no later code can lift), then imports the controller file and answers the
+sandbox. It first forbids itself new processes, network sockets and any reach into other processes
+(seccomp, where libseccomp is available: a filter no later code can lift), then imports the controller file and answers the
 evaluator's messages (hexbench.evaluation.wire): build a controller per task, reset it, and turn each
 observation into an action. Everything it sends is plain data: the action's dtype, shape and
 bytes, never an object; the evaluator checks it all again.
@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import errno
 import functools
+import os
 import sys
 
 import numpy as np
@@ -26,22 +27,40 @@ CLONE_THREAD = 0x00010000
 AF_UNIX = 1
 
 
+# calls that reach another process by its pid: allowed only where that pid is this process's own
+SIGNAL_CALLS_BY_TGID = ("kill", "tgkill", "rt_sigqueueinfo", "rt_tgsigqueueinfo")
+OTHER_PROCESS_CALLS = ("ptrace", "process_vm_readv", "process_vm_writev", "tkill", "pidfd_open",
+                       "pidfd_send_signal", "pidfd_getfd", "process_madvise", "process_mrelease", "kcmp")
+
+
 def forbid_processes_and_network() -> str:
     """Install a seccomp filter: no fork/vfork/clone without CLONE_THREAD, clone3 unavailable (glibc
-    falls back to clone), sockets only of the AF_UNIX family. Returns what was installed."""
+    falls back to clone), sockets only of the AF_UNIX family, and no reach into other processes:
+    signals only to this process, no resource limits or priority but its own, no tracing, pidfds
+    or cross-process memory calls. Under bubblewrap the evaluator is outside the controller's PID
+    namespace anyway; under `--isolation process` it may run as the same user, who could otherwise
+    stop, kill or starve it (SIGSTOP, SIGKILL, a file-size limit of 0 set with prlimit).
+    Returns what was installed."""
     try:
         import pyseccomp as seccomp
     except Exception:  # noqa: BLE001 - libseccomp or its binding missing: the sandbox records "seccomp: off"
         return "off"
     try:
+        deny = seccomp.ERRNO(errno.EPERM)
+        own_pid = os.getpid()
         flt = seccomp.SyscallFilter(seccomp.ALLOW)
         for call in ("fork", "vfork"):
-            flt.add_rule(seccomp.ERRNO(errno.EPERM), call)
+            flt.add_rule(deny, call)
         flt.add_rule(seccomp.ERRNO(errno.ENOSYS), "clone3")
-        flt.add_rule(seccomp.ERRNO(errno.EPERM), "clone", seccomp.Arg(0, seccomp.MASKED_EQ, CLONE_THREAD, 0))
-        flt.add_rule(seccomp.ERRNO(errno.EPERM), "socket", seccomp.Arg(0, seccomp.NE, AF_UNIX))
-        for call in ("ptrace", "process_vm_readv", "process_vm_writev"):
-            flt.add_rule(seccomp.ERRNO(errno.EPERM), call)
+        flt.add_rule(deny, "clone", seccomp.Arg(0, seccomp.MASKED_EQ, CLONE_THREAD, 0))
+        flt.add_rule(deny, "socket", seccomp.Arg(0, seccomp.NE, AF_UNIX))
+        for call in SIGNAL_CALLS_BY_TGID:  # raise(), os.kill(os.getpid()) and pthread_kill still work
+            flt.add_rule(deny, call, seccomp.Arg(0, seccomp.NE, own_pid))
+        flt.add_rule(deny, "prlimit64", seccomp.Arg(0, seccomp.NE, 0))  # getrlimit/setrlimit pass 0: itself
+        flt.add_rule(deny, "setpriority", seccomp.Arg(0, seccomp.NE, 0))  # PRIO_PROCESS only ...
+        flt.add_rule(deny, "setpriority", seccomp.Arg(1, seccomp.NE, 0))  # ... of itself
+        for call in OTHER_PROCESS_CALLS:
+            flt.add_rule(deny, call)
         flt.load()
     except Exception:  # noqa: BLE001
         return "off"

@@ -84,8 +84,9 @@ class LocalEngine:
             return
         ctx = get_context("spawn")
         next_core = ctx.Value("i", 0)
+        hide = any(getattr(job, "isolation", None) == "process" for job in todo)
         with ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=worker_init,
-                                 initargs=(os.getpid(), next_core)) as pool:
+                                 initargs=(os.getpid(), next_core, hide)) as pool:
             futures = {pool.submit(run_episode, job): job for job in todo}
             pending = set(futures)
             try:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import errno
 import os
 import resource
 import shutil
@@ -109,8 +110,9 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
         user = "nobody"
     else:
         user = "uid 65534 in a user namespace mapped to root, no capabilities" if mode == "bubblewrap" \
-            else "root (the Python environment is not readable by nobody)"
-    record = {"mode": mode, "sandboxed": True, "seccomp": "no new processes, AF_UNIX sockets only"
+            else "root without capabilities (the Python environment is not readable by nobody)"
+    record = {"mode": mode, "sandboxed": True,
+              "seccomp": "no new processes, AF_UNIX sockets only, signals and limits to itself only"
               if seccomp_available() else "off",
               "user": user,
               "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,
@@ -122,7 +124,8 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
                       filesystem="read-only: Python environment, hexbench, controller folder; private scratch")
     else:
         record.update(network="blocked by seccomp" if seccomp_available() else "open",
-                      filesystem="not hidden (process fallback)")
+                      filesystem="not hidden (process fallback)",
+                      evaluator_memory="out of reach (the evaluator's processes are not dumpable)")
     return record
 
 
@@ -203,8 +206,19 @@ def clean_env(home: str) -> dict[str, str]:
     return env
 
 
-def preexec_for(limits: Limits, drop_to_nobody: bool, die_with_parent: bool):
-    libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+PR_SET_PDEATHSIG, PR_SET_DUMPABLE, PR_CAPBSET_DROP = 1, 4, 24
+
+
+def _libc():
+    return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+
+
+def preexec_for(limits: Limits, drop_to_nobody: bool, die_with_parent: bool, drop_capabilities: bool = False):
+    """What the child runs between fork and exec: its rlimits, death with its parent, and its user:
+    `nobody`, or (`drop_capabilities`, a root evaluator whose Python environment nobody cannot
+    read) root with an empty capability bounding set, so that the exec leaves it no capability: it
+    cannot read other users' files, trace, or read the memory of a process that is not dumpable."""
+    libc = _libc()
 
     def run() -> None:  # runs in the child between fork and exec
         for what, value in ((resource.RLIMIT_AS, limits.address_space_bytes),
@@ -214,10 +228,25 @@ def preexec_for(limits: Limits, drop_to_nobody: bool, die_with_parent: bool):
                             (resource.RLIMIT_CORE, 0)):
             resource.setrlimit(what, (value, value))
         if die_with_parent:
-            libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+            libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL)
+        for capability in range(64 if drop_capabilities else 0):
+            if libc.prctl(PR_CAPBSET_DROP, capability, 0, 0, 0) != 0:
+                if ctypes.get_errno() == errno.EINVAL:  # past the last capability this kernel knows
+                    break
+                raise OSError(ctypes.get_errno(), f"cannot drop capability {capability}")
         if drop_to_nobody:
             os.setgroups([])
             os.setgid(SANDBOX_UID)
             os.setuid(SANDBOX_UID)
 
     return run
+
+
+def hide_from_controllers() -> None:
+    """Make this evaluating process not dumpable: a controller process running as the same user
+    (`--isolation process` under a non-root evaluator) can then neither read nor write its memory
+    (/proc/PID/mem), nor open its files (/proc/PID/fd) or read its environment. Set in every process
+    that plays or collects episodes of a process-isolated controller, before any controller starts
+    (a /proc file opened earlier would stay usable). Costs core dumps and same-user debuggers."""
+    _libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
+

@@ -9,9 +9,13 @@ Isolation modes (what every record states, `isolation_record`):
               private /tmp and a size-limited scratch working folder, a clean environment, its own
               session. When the evaluator runs as root the sandbox is started as `nobody`.
   process     (fallback where bubblewrap is missing) a plain child process: own session, clean
-              environment, scratch working folder, `nobody` when the evaluator is root. The file
-              system is not hidden: it can read what `nobody` can read and write world-writable
-              folders such as /tmp. Use it only where bubblewrap cannot be installed.
+              environment, scratch working folder, `nobody` when the evaluator is root (else root
+              without capabilities, or the evaluating user). The file system is not hidden: it can
+              read what its user can read and write world-writable folders such as /tmp. The
+              evaluator's processes are made not dumpable (their memory, files and environment
+              are out of a same-user controller's reach), and seccomp keeps signals, resource
+              limits and tracing to the controller's own process. Use it only where bubblewrap
+              cannot be installed.
   none        the controller runs inside the evaluator (debugging only): it can reach the simulator
               and forge its score; records say so and the leaderboard refuses them.
 In both sandboxed modes: resource limits (address space 4 GiB, CPU time, open files, file size),
@@ -51,6 +55,7 @@ from hexbench.evaluation.isolation import (
     bubblewrap_version,
     bwrap_argv,
     clean_env,
+    hide_from_controllers,
     isolation_record,
     preexec_for,
     resolve_isolation,
@@ -160,16 +165,19 @@ class ControllerProcess:
             argv, cwd, env, die = bwrap_argv(self.path.parent, self.limits, self.hidden) + ["--"] + host, "/", \
                 clean_env("/scratch"), False
         else:
+            hide_from_controllers()  # the same user may run it: it must not reach this process's memory
             scratch = Path(self._tmp) / "scratch"
             scratch.mkdir()
             if drop:
                 os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
                 os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
             argv, cwd, env, die = host, str(scratch), clean_env(str(scratch)), True
+        drop_capabilities = self.isolation == "process" and os.geteuid() == 0 and not drop
         try:
             self.proc = subprocess.Popen(argv, pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL,
                                          stdout=subprocess.DEVNULL, stderr=self._stderr, cwd=cwd, env=env,
-                                         start_new_session=True, preexec_fn=preexec_for(self.limits, drop, die))
+                                         start_new_session=True,
+                                         preexec_fn=preexec_for(self.limits, drop, die, drop_capabilities))
         except OSError as e:
             raise ControllerError(f"{self.file}: the controller process could not start ({e})") from None
         finally:

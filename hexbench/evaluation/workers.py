@@ -10,7 +10,7 @@ import os
 import time
 from pathlib import Path
 
-from hexbench.evaluation import sandbox
+from hexbench.evaluation import isolation, sandbox
 from hexbench.suite.numerics import use_controller_math
 
 
@@ -22,10 +22,15 @@ def exit_when_orphaned(parent_pid: int, poll_s: float = 1.0) -> None:
     os._exit(1)
 
 
-def worker_init(parent_pid: int, next_core=None) -> None:
+def worker_init(parent_pid: int, next_core=None, hide_from_controllers: bool = False) -> None:
+    """A pool worker's set-up: the orphan watchdog, the controller processes' clean-up, the
+    controllers' math, its core; and (`hide_from_controllers`, for process-isolated controllers)
+    not dumpable before any controller of any worker starts."""
     import threading
     from multiprocessing import util
 
+    if hide_from_controllers:
+        isolation.hide_from_controllers()
     threading.Thread(target=exit_when_orphaned, args=(parent_pid,), daemon=True, name="orphan-watchdog").start()
     util.Finalize(None, sandbox.close_all, exitpriority=10)
     use_controller_math()  # for in-process controllers here; sandboxed ones get it in their clean environment
