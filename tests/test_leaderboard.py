@@ -16,6 +16,7 @@ from typer.testing import CliRunner
 from hexbench import leaderboard as lb
 from hexbench.cli import app
 from hexbench.leaderboard.markdown import md_code, md_table, md_text
+from hexbench.leaderboard.records import TIER_HIDDEN
 from hexbench.suite import scoring
 from hexbench.suite.tasks import load_suite
 
@@ -349,6 +350,24 @@ def test_cli_add_replays_a_run_copies_it_with_its_admission_and_rebuilds(tmp_pat
     forged["episodes"][0]["end_reason"] = "success"
     with pytest.raises(lb.RecordError, match="changed after admission"):
         lb.record_tier(forged, "forged.json")
+
+
+@pytest.mark.parametrize("isolation, tier", [
+    ({"mode": "bubblewrap", "sandboxed": True}, TIER_HIDDEN),
+    ({"mode": "process", "sandboxed": True, "user": "nobody"}, TIER_HIDDEN),
+    ({"mode": "process", "sandboxed": True, "user": "the evaluating user"}, lb.TIER_REPLAYED),
+    ({"mode": "process", "sandboxed": True, "user": "root without capabilities (the Python environment is "
+                                                    "not readable by nobody)"}, lb.TIER_REPLAYED),
+])
+def test_hidden_seeds_rank_as_hidden_only_where_the_controller_could_not_read_the_key(isolation, tier):
+    from hexbench.artifacts.records import episodes_digest
+
+    digest = episodes_digest([])
+    record = {"provenance": {"isolation": isolation, "seed_set": {"kind": "keyed", "key_fingerprint": "0" * 16}},
+              "admission": {"episodes_digest": digest}, "episodes_digest": digest, "episodes": []}
+    assert lb.record_tier(record, "keyed.json") == tier
+    record["provenance"]["seed_set"] = {"kind": "public"}
+    assert lb.record_tier(record, "public.json") == lb.TIER_REPLAYED
 
 
 def test_add_refuses_a_forged_run_and_one_made_in_process(tmp_path, tiny_protocol):

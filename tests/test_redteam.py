@@ -62,6 +62,7 @@ class Case:
     out: str = ""  # the output folder: "" tmp_path/out; "runs": runs/<name>-v1 next to a copy of the file (the
     # default layout when the file sits in the working directory); "same": the copy's own folder
     sparse_files: tuple[tuple[str, int], ...] = ()  # (name, size [bytes]) of sparse files made beside a copy of the file
+    seed_key: bool = False  # run with --seed-key, a key file beside a copy of the file (mode 644, in an owner-only folder)
 
 
 TIMEOUT_WORDS = ("timeout", "timed out", "took longer", "deadline", "time limit")
@@ -86,6 +87,10 @@ CASES: dict[str, Case] = {
     "attack_signal_evaluator@process": Case(HONEST, extra_args=PROCESS),
     "attack_evaluator_memory": Case(HONEST),
     "attack_evaluator_memory@process": Case(HONEST, extra_args=PROCESS),
+    "attack_read_seed_key": Case(HONEST, seed_key=True, needs_bwrap=True),
+    # refused where the controller process could read the key; where it runs as nobody and nobody
+    # cannot (a root evaluator, the key under the test's owner-only folder) it must score honestly
+    "attack_read_seed_key@process": Case(EITHER, seed_key=True, extra_args=PROCESS, error_words=("--seed-key",)),
     "attack_write_outside": Case(EITHER, needs_bwrap=True),
     "attack_overwrite_source": Case(EITHER, needs_bwrap=True),
     "attack_socket": Case(EITHER, needs_bwrap=True),
@@ -311,12 +316,18 @@ def test_attack_is_contained(name, tmp_path):
     listeners = _Listeners() if name == "attack_socket" else None
     problems: list[str] = []
     try:
-        controller = _controller_file(name, tmp_path, listeners, bool(case.out), case.sparse_files)
+        controller = _controller_file(name, tmp_path, listeners, bool(case.out) or case.seed_key, case.sparse_files)
         out_dir = {"": tmp_path / "out", "runs": controller.parent / "runs" / f"{controller.stem}-v1",
                    "same": controller.parent}[case.out]
         files = [str(controller)] + ([str(CPG)] if case.then_cpg else [])
+        key_args: list[str] = []
+        if case.seed_key:  # inside the controller's own folder: the sandbox must cover it up there too
+            key = controller.parent / "seed.key"
+            key.write_bytes(b"hexbench red-team seed key, 32+ bytes long")
+            key.chmod(0o644)
+            key_args = ["--seed-key", str(key)]
         args = [sys.executable, "-m", "hexbench", "run", *files, "--terrain", "stairs", "--levels", "8",
-                "--episodes", "1", "--workers", "1", "--no-record", "--out", str(out_dir), *case.extra_args]
+                "--episodes", "1", "--workers", "1", "--no-record", "--out", str(out_dir), *key_args, *case.extra_args]
         rc, wall_s, pgid, stdout, stderr = _run(args, tmp_path, timeout_s)
     finally:
         if listeners is not None:

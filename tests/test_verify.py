@@ -3,6 +3,7 @@
 import json
 import os
 import shutil
+import tempfile
 import time
 from pathlib import Path
 
@@ -120,6 +121,27 @@ def test_keyed_seed_sets_are_hidden_and_checked_with_the_key(tmp_path, tiny_prot
     short.write_bytes(b"abc")
     bad = CliRunner().invoke(app, ["run", CPG, "--seed-key", str(short), "--out", str(tmp_path / "o")])
     assert bad.exit_code == 2 and "at least 16 random bytes" in bad.output
+
+
+def test_a_seed_key_the_controller_could_read_is_refused_before_any_episode(tmp_path, tiny_protocol):
+    """Under --isolation process the controller runs as the evaluating user, as root without
+    capabilities, or as nobody: a key that its user can read would be no secret."""
+    folder = Path(tempfile.mkdtemp(prefix="hexbench-test-key-"))  # under /tmp: others may enter
+    try:
+        folder.chmod(0o755)
+        key = folder / "key"
+        key.write_bytes(b"k" * 32)
+        key.chmod(0o644)
+        out = tmp_path / "keyed"
+        res = CliRunner().invoke(app, ["run", CPG, "--terrain", "stairs", "--levels", "2", "--episodes", "1",
+                                       "--workers", "1", "--no-record", "--out", str(out), "--seed-key", str(key),
+                                       "--isolation", "process"])
+    finally:
+        shutil.rmtree(folder)
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code == 1 and len(lines) == 1, res.output
+    assert "cpg.py" in lines[0] and "--seed-key" in lines[0] and "bubblewrap" in lines[0]
+    assert not out.exists()
 
 
 def test_resume_takes_a_journal_entry_only_if_its_action_log_replays_into_it(tmp_path, tiny_protocol):

@@ -38,10 +38,10 @@ from hexbench.artifacts.records import episode_record_rows, episodes_digest, val
 from hexbench.errors import HexbenchError, InputError, OutputError
 from hexbench.evaluation import engines, sandbox
 from hexbench.evaluation.episode import EpisodeJob, first_row_difference, replay_row
-from hexbench.evaluation.isolation import hide_from_controllers
+from hexbench.evaluation.isolation import hide_from_controllers, seed_key_problem
 from hexbench.suite.controller import ControllerError, controller_file_problem
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
-from hexbench.suite.seeds import SeedSet, run_secret
+from hexbench.suite.seeds import SeedKeyError, SeedSet, run_secret
 from hexbench.suite.tasks import TaskSpec
 
 # ---------------------------------------------------------------------------------- records
@@ -232,6 +232,9 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     problem = controller_file_problem(controller_file)
     if problem:
         raise ControllerError(problem)
+    key_problem = seed_key_problem(mode, controller_file, seed_set.source if seed_set.key is not None else None)
+    if key_problem:
+        raise SeedKeyError(key_problem)
     if mode == "process":
         hide_from_controllers()  # before any controller process starts (workers do the same)
     created = _prepare_out(out)

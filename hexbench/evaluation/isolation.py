@@ -250,3 +250,20 @@ def hide_from_controllers() -> None:
     (a /proc file opened earlier would stay usable). Costs core dumps and same-user debuggers."""
     _libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
 
+
+def seed_key_problem(mode: str, controller_file: str | Path, key_file: str | Path | None) -> str | None:
+    """Why a controller process under `mode` could read the seed key `key_file` (then hidden seeds
+    would be no secret to it), or None. Under bubblewrap the key is covered up; under process
+    isolation the controller runs as `nobody` only for a root evaluator, and otherwise as a user
+    who can read the key."""
+    if key_file is None or mode != "process":
+        return None
+    if runs_as_nobody(controller_file):
+        if not readable_by_others(Path(key_file)):
+            return None
+        return (f"{controller_file}: --seed-key {key_file}: the controller process runs as nobody, who can read that key; "
+                f"keep the key where others cannot read it (chmod o-r), or use bubblewrap isolation")
+    who = "root" if os.geteuid() == 0 else "you"
+    return (f"{controller_file}: --seed-key {key_file}: under --isolation process its controller process runs as {who} and "
+            f"could read the key, so the seeds would not be hidden; hidden seeds need bubblewrap isolation "
+            f"(Debian: apt-get install bubblewrap)")

@@ -15,7 +15,7 @@ Isolation modes (what every record states, `isolation_record`):
               evaluator's processes are made not dumpable (their memory, files and environment
               are out of a same-user controller's reach), and seccomp keeps signals, resource
               limits and tracing to the controller's own process. Use it only where bubblewrap
-              cannot be installed.
+              cannot be installed; a seed key it could read is refused (`seed_key_problem`).
   none        the controller runs inside the evaluator (debugging only): it can reach the simulator
               and forge its score; records say so and the leaderboard refuses them.
 In both sandboxed modes: resource limits (address space 4 GiB, CPU time, open files, file size),

@@ -13,7 +13,8 @@ Records (hexbench/artifacts/schemas/result.schema.json) come in two kinds, valid
              is one reported controller with per-level success rates.
 
 A measured record's trust tier says how far it is proven: self-reported, sandboxed + replayed (its
-admission block, bound to its rows by their digest), or + hidden seeds (a keyed seed set).
+admission block, bound to its rows by their digest), or + hidden seeds (a keyed seed set whose key
+its controller process could not read: `key_was_hidden`).
 Records are read in file-name order; records of another protocol are skipped, not mixed in.
 """
 
@@ -219,7 +220,16 @@ def record_tier(record: dict, where: str) -> str:
     if not isolation.get("sandboxed"):
         return TIER_SELF_REPORTED
     keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed"
-    return TIER_HIDDEN if keyed else TIER_REPLAYED
+    return TIER_HIDDEN if keyed and key_was_hidden(isolation) else TIER_REPLAYED
+
+
+def key_was_hidden(isolation: dict) -> bool:
+    """Whether the controller process of a keyed run could not read the key: bubblewrap covers it
+    up; under process isolation only `nobody` is kept from it (a key that nobody could read is
+    refused at run time, hexbench.evaluation.isolation.seed_key_problem). A controller that ran as
+    the evaluating user or as root could have read it, so its record ranks as public seeds do."""
+    return isolation.get("mode") == "bubblewrap" or (isolation.get("mode") == "process"
+                                                     and isolation.get("user") == "nobody")
 
 
 # ---------------------------------------------------------------------------------- rows
@@ -262,7 +272,9 @@ def measured_row(record: dict, where: str, course: bool = False, terrains_covere
     else:
         tasks = suite.tasks
     tier = record_tier(record, where)
-    _check_episodes(record, suite, where, tasks, keyed=tier.endswith("hidden seeds"))
+    # a keyed seed set's seeds are checked against the key at admission; a self-reported one's cannot be
+    keyed = tier != TIER_SELF_REPORTED and record["provenance"].get("seed_set", {}).get("kind") == "keyed"
+    _check_episodes(record, suite, where, tasks, keyed=keyed)
     units = {t.terrain: t.unit for t in tasks}
     headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     # Episode levels are normalised to the suite's float so the headroom lookup cannot miss.
