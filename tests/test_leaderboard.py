@@ -356,6 +356,7 @@ def test_cli_add_replays_a_run_copies_it_with_its_admission_and_rebuilds(tmp_pat
     ({"mode": "bubblewrap", "sandboxed": True}, TIER_HIDDEN),
     ({"mode": "process", "sandboxed": True, "user": "nobody"}, TIER_HIDDEN),
     ({"mode": "process", "sandboxed": True, "user": "the evaluating user"}, lb.TIER_REPLAYED),
+    ({"mode": "process", "sandboxed": True, "user": "the evaluating user", "landlock_abi": 7}, TIER_HIDDEN),
     ({"mode": "process", "sandboxed": True, "user": "root without capabilities (the Python environment is "
                                                     "not readable by nobody)"}, lb.TIER_REPLAYED),
 ])

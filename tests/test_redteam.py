@@ -37,6 +37,8 @@ from pathlib import Path
 
 import pytest
 
+from hexbench.evaluation.isolation import landlock_abi
+
 REPO = Path(__file__).resolve().parent.parent
 CONTROLLERS = REPO / "tests" / "controllers"
 CPG = REPO / "baselines" / "cpg.py"
@@ -55,6 +57,7 @@ class Case:
     expect: str
     max_s: float = 60.0  # the whole command's wall time [s]
     needs_bwrap: bool = False  # only a sandbox can stop it
+    needs_landlock: bool = False  # under --isolation process, only Landlock can stop it
     then_cpg: bool = False  # baselines/cpg.py follows on the same command line and must still be evaluated
     extra_args: tuple[str, ...] = ()
     error_words: tuple[str, ...] = ()  # the error line names one of these (case-insensitive)
@@ -80,6 +83,8 @@ CASES: dict[str, Case] = {
     "attack_seed_foresight": Case(HONEST),
     "attack_run_secret": Case(HONEST, out="runs"),
     "attack_run_secret@same-folder": Case(HONEST, out="same"),  # `hexbench run ./mine.py --out .`
+    "attack_run_secret@process": Case(HONEST, out="runs", needs_landlock=True, extra_args=PROCESS),
+    "attack_run_secret@process-same-folder": Case(HONEST, out="same", needs_landlock=True, extra_args=PROCESS),
     "attack_proc_parent": Case(HONEST, needs_bwrap=True),
     # under --isolation process the controller may run as the evaluator's user (or as root): only
     # seccomp and an evaluator that is not dumpable keep it from the evaluator's processes
@@ -92,8 +97,11 @@ CASES: dict[str, Case] = {
     # cannot (a root evaluator, the key under the test's owner-only folder) it must score honestly
     "attack_read_seed_key@process": Case(EITHER, seed_key=True, extra_args=PROCESS, error_words=("--seed-key",)),
     "attack_write_outside": Case(EITHER, needs_bwrap=True),
+    "attack_write_outside@process": Case(EITHER, needs_landlock=True, extra_args=PROCESS),
     "attack_overwrite_source": Case(EITHER, needs_bwrap=True),
+    "attack_overwrite_source@process": Case(EITHER, needs_landlock=True, extra_args=PROCESS),
     "attack_socket": Case(EITHER, needs_bwrap=True),
+    "attack_socket@process": Case(EITHER, needs_landlock=True, extra_args=PROCESS),
     "attack_detached_child": Case(EITHER),
     "attack_fork": Case(EITHER),
     "attack_memory_bomb": Case(EITHER),
@@ -310,10 +318,12 @@ def test_attack_is_contained(name, tmp_path):
     case = CASES[name]
     if case.needs_bwrap and not HAVE_BWRAP:
         pytest.skip("needs bubblewrap (bwrap) to be contained")
+    if case.needs_landlock and not landlock_abi():
+        pytest.skip("needs Landlock (Linux 5.13+, py-landlock) to be contained under --isolation process")
     timeout_s = case.max_s + 30.0
     _remove(_attack_files(tmp_path))  # left over from an earlier run
     git_before = _git_state()
-    listeners = _Listeners() if name == "attack_socket" else None
+    listeners = _Listeners() if name.split("@")[0] == "attack_socket" else None
     problems: list[str] = []
     try:
         controller = _controller_file(name, tmp_path, listeners, bool(case.out) or case.seed_key, case.sparse_files)

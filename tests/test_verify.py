@@ -13,6 +13,7 @@ from typer.testing import CliRunner
 from hexbench.artifacts.records import MAX_RECORD_BYTES, episodes_digest
 from hexbench.cli import app
 from hexbench.evaluation.evaluate import evaluate
+from hexbench.evaluation.isolation import landlock_abi
 from hexbench.replay.verify import verify_run
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedSet
@@ -123,25 +124,48 @@ def test_keyed_seed_sets_are_hidden_and_checked_with_the_key(tmp_path, tiny_prot
     assert bad.exit_code == 2 and "at least 16 random bytes" in bad.output
 
 
-def test_a_seed_key_the_controller_could_read_is_refused_before_any_episode(tmp_path, tiny_protocol):
-    """Under --isolation process the controller runs as the evaluating user, as root without
-    capabilities, or as nobody: a key that its user can read would be no secret."""
-    folder = Path(tempfile.mkdtemp(prefix="hexbench-test-key-"))  # under /tmp: others may enter
+def _run_keyed_in_process(controller: str, key: Path, out: Path):
+    return CliRunner().invoke(app, ["run", controller, "--terrain", "stairs", "--levels", "2", "--episodes", "1",
+                                    "--workers", "1", "--no-record", "--out", str(out), "--seed-key", str(key),
+                                    "--isolation", "process"])
+
+
+def _keyed_run_beside(controller: Path, tmp_path: Path):
+    """`hexbench run` of a copy of `controller` with --isolation process and a seed key beside it,
+    readable by all, in a folder others may enter (under /tmp)."""
+    folder = Path(tempfile.mkdtemp(prefix="hexbench-test-key-"))
     try:
         folder.chmod(0o755)
+        copy = folder / controller.name
+        shutil.copy(controller, copy)
         key = folder / "key"
         key.write_bytes(b"k" * 32)
         key.chmod(0o644)
-        out = tmp_path / "keyed"
-        res = CliRunner().invoke(app, ["run", CPG, "--terrain", "stairs", "--levels", "2", "--episodes", "1",
-                                       "--workers", "1", "--no-record", "--out", str(out), "--seed-key", str(key),
-                                       "--isolation", "process"])
+        return _run_keyed_in_process(str(copy), key, tmp_path / "keyed")
     finally:
         shutil.rmtree(folder)
+
+
+@pytest.mark.skipif(bool(landlock_abi()), reason="Landlock leaves the key out of what the controller may open")
+def test_a_seed_key_the_controller_could_read_is_refused_before_any_episode(tmp_path, tiny_protocol):
+    """Without Landlock, under --isolation process the controller runs as the evaluating user, as
+    root without capabilities, or as nobody: a key that its user can read would be no secret."""
+    res = _keyed_run_beside(Path(CPG), tmp_path)
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert res.exit_code == 1 and len(lines) == 1, res.output
-    assert "cpg.py" in lines[0] and "--seed-key" in lines[0] and "bubblewrap" in lines[0]
-    assert not out.exists()
+    assert "cpg.py" in lines[0] and "--seed-key" in lines[0]
+    assert not (tmp_path / "keyed").exists()
+
+
+@pytest.mark.skipif(not landlock_abi(), reason="needs Landlock (Linux 5.13+) to keep the key from the controller")
+def test_landlock_hides_a_seed_key_even_in_the_controllers_own_folder(tmp_path, tiny_protocol):
+    """The red-team controller that finds the key through the evaluator's command line and shows
+    it with an out-of-range action walks honestly: the key beside it cannot be opened."""
+    res = _keyed_run_beside(REPO / "tests" / "controllers" / "attack_read_seed_key.py", tmp_path)
+    assert res.exit_code == 0, res.output
+    record = json.loads((tmp_path / "keyed" / "result.json").read_text())
+    assert record["provenance"]["seed_set"]["kind"] == "keyed"
+    assert record["provenance"]["isolation"]["landlock_abi"] == landlock_abi()
 
 
 def test_resume_takes_a_journal_entry_only_if_its_action_log_replays_into_it(tmp_path, tiny_protocol):

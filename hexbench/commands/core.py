@@ -156,6 +156,7 @@ def _register_run(app: typer.Typer) -> None:
         from hexbench.errors import HexbenchError
         from hexbench.evaluation import engines
         from hexbench.evaluation.evaluate import evaluate
+        from hexbench.evaluation.isolation import landlock_abi
         from hexbench.evaluation.sandbox import resolve_isolation
         from hexbench.suite.seeds import SeedSet, read_seed_key
         from hexbench.suite.tasks import load_suite
@@ -171,8 +172,9 @@ def _register_run(app: typer.Typer) -> None:
             typer.echo(f"error: {e}", err=True)
             raise typer.Exit(2)
         if mode == "process" and isolation == "auto":
-            err.print("note: bubblewrap is not usable here; controllers run in plain child processes "
-                      "(--isolation process: the file system is not hidden). Debian: apt-get install bubblewrap")
+            files = "Landlock keeps them to their files" if landlock_abi() else "the file system is not hidden"
+            err.print(f"note: bubblewrap is not usable here; controllers run in plain child processes "
+                      f"(--isolation process: {files}). Debian: apt-get install bubblewrap")
         if record:
             try:
                 import hexbench.recording  # noqa: F401

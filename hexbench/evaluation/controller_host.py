@@ -2,7 +2,8 @@
 
 Started by `hexbench.evaluation.sandbox` as `python -I -B -m hexbench.evaluation.controller_host IN_FD OUT_FD` inside the
 sandbox. It first forbids itself new processes, network sockets and any reach into other processes
-(seccomp, where libseccomp is available: a filter no later code can lift), then imports the controller file and answers the
+(seccomp, where libseccomp is available: a filter no later code can lift) and, under process
+isolation where the kernel has Landlock, every file but those the sandbox would show, then imports the controller file and answers the
 evaluator's messages (hexbench.evaluation.wire): build a controller per task, reset it, and turn each
 observation into an action. Everything it sends is plain data: the action's dtype, shape and
 bytes, never an object; the evaluator checks it all again.
@@ -65,6 +66,21 @@ def forbid_processes_and_network() -> str:
     except Exception:  # noqa: BLE001
         return "off"
     return "on"
+
+
+def restrict_files(rules: dict) -> None:
+    """Landlock (`--isolation process`, where the kernel has it): from here on this process and its
+    threads open only what `rules` name (hexbench.evaluation.isolation.landlock_rules), signal no
+    process and reach no abstract socket outside its own Landlock domain, and no process can be
+    traced or its /proc memory read from here. Raises if the kernel refuses."""
+    from py_landlock import AccessFs, Landlock
+
+    read_file, write_file = AccessFs.READ_FILE, AccessFs.WRITE_FILE | AccessFs.TRUNCATE
+    ruleset = Landlock(strict=False).allow_read(*rules["read_folders"]).allow_read_write(*rules["write_folders"])
+    ruleset.add_path_rule(*rules["list_folders"], access=AccessFs.READ_DIR)
+    ruleset.add_path_rule(*rules["read_files"], access=read_file)
+    ruleset.add_path_rule(*rules["write_files"], access=read_file | write_file)
+    ruleset.apply()
 
 
 def declared(ctrl) -> dict:
@@ -178,10 +194,27 @@ def wire_json(payload: bytes) -> dict:
 
 def main(argv: list[str]) -> None:
     in_fd, out_fd, seccomp = int(argv[1]), int(argv[2]), argv[3] if len(argv) > 3 else "on"
+    landlock = argv[4] if len(argv) > 4 else "off"
+    if landlock != "off":
+        try:  # binds libc while it may still be looked up (ctypes runs ldconfig: a new process)
+            from py_landlock import get_abi_version
+
+            get_abi_version()
+        except Exception:  # noqa: BLE001 - reported by restrict_files below
+            pass
     if seccomp == "on" and forbid_processes_and_network() != "on":
         wire.write_all(out_fd, wire.frame(wire.ERROR, wire.json_payload(
-            {"message": "the sandbox could not install its seccomp filter (is libseccomp2 installed?)"})))
+            {"type": "SandboxError", "message": "the sandbox could not install its seccomp filter (is libseccomp2 installed?)"})))
         return
+    if landlock != "off":
+        import json
+
+        try:
+            restrict_files(json.loads(landlock))
+        except Exception as e:  # noqa: BLE001 - the evaluator was told Landlock works here: refuse to go on
+            wire.write_all(out_fd, wire.frame(wire.ERROR, wire.json_payload(
+                {"type": "SandboxError", "message": f"the sandbox could not apply its Landlock rules ({type(e).__name__}: {e})"[:500]})))
+            return
     Host(in_fd, out_fd).serve()
 
 

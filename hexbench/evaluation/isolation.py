@@ -3,7 +3,8 @@
 `bubblewrap` (the default where `bwrap` works), `process` (the fallback) and `none` (in-process,
 for debugging; the leaderboard refuses its records) are described in hexbench.evaluation.sandbox,
 which starts the processes. This module decides which mode applies, what a record says about it,
-what the process may see (`visible_paths`, `bwrap_argv`), its environment and its rlimits.
+what the process may see (`visible_paths`, `bwrap_argv`, `landlock_rules`), its environment, its rlimits
+and capabilities, and what keeps a same-user controller away from the evaluator.
 """
 
 from __future__ import annotations
@@ -70,6 +71,19 @@ def bubblewrap_version() -> str | None:
 
 
 @lru_cache(maxsize=1)
+def landlock_abi() -> int:
+    """The kernel's Landlock ABI version, 0 where Landlock or its binding (py-landlock) is missing.
+    Under `--isolation process` Landlock gives the controller the file view of the bubblewrap
+    sandbox without namespaces: read-only what it needs, its scratch folder writable, nothing else."""
+    try:
+        from py_landlock import get_abi_version
+
+        return int(get_abi_version())
+    except Exception:  # noqa: BLE001 - not Linux, Landlock off at boot, or the binding missing
+        return 0
+
+
+@lru_cache(maxsize=1)
 def seccomp_available() -> bool:
     try:
         import pyseccomp  # noqa: F401
@@ -123,9 +137,13 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
         record.update(bubblewrap=bubblewrap_version(), network="none (own network namespace)",
                       filesystem="read-only: Python environment, hexbench, controller folder; private scratch")
     else:
+        landlock = landlock_abi()
         record.update(network="blocked by seccomp" if seccomp_available() else "open",
-                      filesystem="not hidden (process fallback)",
+                      filesystem=f"Landlock ABI {landlock}: read-only Python environment, hexbench, controller folder, "
+                                 f"system libraries; private scratch" if landlock else "not hidden (process fallback)",
                       evaluator_memory="out of reach (the evaluator's processes are not dumpable)")
+        if landlock:
+            record["landlock_abi"] = landlock
     return record
 
 
@@ -169,6 +187,48 @@ def visible_paths(controller_dir: Path) -> list[Path]:
 
 SYSTEM_DIRS = ("/usr", "/bin", "/sbin", "/lib", "/lib64", "/lib32")
 SYSTEM_FILES = ("/etc/ld.so.cache", "/etc/ld.so.conf", "/etc/localtime", "/etc/passwd", "/etc/group")
+DEVICE_FILES = ("/dev/null", "/dev/zero", "/dev/urandom", "/dev/random")  # what a sandbox's /dev holds
+
+
+def landlock_rules(controller_dir: Path, scratch: Path, hidden: tuple[str, ...] = ()) -> dict[str, list[str]]:
+    """What a process-isolated controller may open once Landlock restricts it, the view bubblewrap
+    gives: folders to read (the Python environment, hexbench, the task files, the controller's
+    folder, the system's library folders and /proc), single files to read (the loader's cache,
+    passwd, the usual devices), its scratch folder and /dev/null to write. Landlock only adds
+    rights, so a `hidden` path inside a readable folder (the run's journal and logs, a seed key) is
+    left out by granting that folder's other entries one by one, and the folders on the way to it
+    only their listing: what appears there later (a journal made after the controller started)
+    stays out of reach too."""
+    hidden_paths = [Path(h).resolve() for h in hidden]
+    rules: dict[str, list[str]] = {"read_folders": [], "read_files": [], "list_folders": [],
+                                   "write_folders": [str(scratch)], "write_files": ["/dev/null"]}
+    for folder in [*visible_paths(controller_dir), *(Path(d) for d in (*SYSTEM_DIRS, "/proc") if os.path.isdir(d))]:
+        _grant_read(folder.resolve(), hidden_paths, rules)
+    rules["read_files"] += [f for f in (*SYSTEM_FILES, *DEVICE_FILES) if os.path.exists(f)]
+    return rules
+
+
+def _grant_read(path: Path, hidden: list[Path], rules: dict[str, list[str]]) -> None:
+    """Read rights on `path` (a folder or a file, resolved), except on the hidden paths within it."""
+    if any(path == h or h in path.parents for h in hidden):
+        return
+    inside = [h for h in hidden if path in h.parents]
+    if not path.is_dir():
+        rules["read_files"].append(str(path))
+    elif not inside:
+        rules["read_folders"].append(str(path))
+    else:
+        rules["list_folders"].append(str(path))
+        try:
+            entries = sorted(path.iterdir())
+        except OSError:
+            return
+        for entry in entries:
+            try:
+                target = entry.resolve(strict=True)  # a link is granted as what it points at
+            except (OSError, RuntimeError):
+                continue
+            _grant_read(target, hidden, rules)
 
 
 def bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = ()) -> list[str]:
@@ -253,14 +313,17 @@ def hide_from_controllers() -> None:
 
 def seed_key_problem(mode: str, controller_file: str | Path, key_file: str | Path | None) -> str | None:
     """Why a controller process under `mode` could read the seed key `key_file` (then hidden seeds
-    would be no secret to it), or None. Under bubblewrap the key is covered up; under process
-    isolation the controller runs as `nobody` only for a root evaluator, and otherwise as a user
-    who can read the key."""
+    would be no secret to it), or None. Under bubblewrap the key is covered up. Under process
+    isolation Landlock, where the kernel has it, leaves the key out of what the controller may
+    open; without Landlock only `nobody`, the controller's user under a root evaluator, can be
+    kept from a key (one that others cannot read)."""
     if key_file is None or mode != "process":
         return None
+    if runs_as_nobody(controller_file) and not readable_by_others(Path(key_file)):
+        return None
+    if landlock_abi():  # the key is one of the paths its rules leave out (`landlock_rules`)
+        return None
     if runs_as_nobody(controller_file):
-        if not readable_by_others(Path(key_file)):
-            return None
         return (f"{controller_file}: --seed-key {key_file}: the controller process runs as nobody, who can read that key; "
                 f"keep the key where others cannot read it (chmod o-r), or use bubblewrap isolation")
     who = "root" if os.geteuid() == 0 else "you"

@@ -10,12 +10,14 @@ Isolation modes (what every record states, `isolation_record`):
               session. When the evaluator runs as root the sandbox is started as `nobody`.
   process     (fallback where bubblewrap is missing) a plain child process: own session, clean
               environment, scratch working folder, `nobody` when the evaluator is root (else root
-              without capabilities, or the evaluating user). The file system is not hidden: it can
-              read what its user can read and write world-writable folders such as /tmp. The
-              evaluator's processes are made not dumpable (their memory, files and environment
-              are out of a same-user controller's reach), and seccomp keeps signals, resource
-              limits and tracing to the controller's own process. Use it only where bubblewrap
-              cannot be installed; a seed key it could read is refused (`seed_key_problem`).
+              without capabilities, or the evaluating user). Where the kernel has Landlock, the
+              controller may open only what bubblewrap would show it, and write only its scratch
+              folder (`landlock_rules`); elsewhere the file system is not hidden: it can read and
+              write what its user can. The evaluator's processes are made not dumpable (their
+              memory, files and environment are out of a same-user controller's reach), and
+              seccomp keeps signals, resource limits and tracing to the controller's own process.
+              Use it only where bubblewrap cannot be installed; a seed key the controller could
+              read is refused (`seed_key_problem`).
   none        the controller runs inside the evaluator (debugging only): it can reach the simulator
               and forge its score; records say so and the leaderboard refuses them.
 In both sandboxed modes: resource limits (address space 4 GiB, CPU time, open files, file size),
@@ -57,6 +59,8 @@ from hexbench.evaluation.isolation import (
     clean_env,
     hide_from_controllers,
     isolation_record,
+    landlock_abi,
+    landlock_rules,
     preexec_for,
     resolve_isolation,
     runs_as_nobody,
@@ -159,7 +163,7 @@ class ControllerProcess:
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
         host = [sys.executable, "-I", "-B", "-c", controller_host_boot(), str(to_child_r), str(from_child_w),
-                "on" if seccomp_available() else "off"]
+                "on" if seccomp_available() else "off", "off"]
         drop = runs_as_nobody(self.path)
         if self.isolation == "bubblewrap":
             argv, cwd, env, die = bwrap_argv(self.path.parent, self.limits, self.hidden) + ["--"] + host, "/", \
@@ -171,6 +175,8 @@ class ControllerProcess:
             if drop:
                 os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
                 os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
+            if landlock_abi():
+                host[-1] = json.dumps(landlock_rules(self.path.parent, scratch, self.hidden))
             argv, cwd, env, die = host, str(scratch), clean_env(str(scratch)), True
         drop_capabilities = self.isolation == "process" and os.geteuid() == 0 and not drop
         try:

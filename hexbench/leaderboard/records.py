@@ -225,11 +225,14 @@ def record_tier(record: dict, where: str) -> str:
 
 def key_was_hidden(isolation: dict) -> bool:
     """Whether the controller process of a keyed run could not read the key: bubblewrap covers it
-    up; under process isolation only `nobody` is kept from it (a key that nobody could read is
-    refused at run time, hexbench.evaluation.isolation.seed_key_problem). A controller that ran as
-    the evaluating user or as root could have read it, so its record ranks as public seeds do."""
-    return isolation.get("mode") == "bubblewrap" or (isolation.get("mode") == "process"
-                                                     and isolation.get("user") == "nobody")
+    up; under process isolation Landlock keeps the controller to its own folders, and without it
+    only `nobody` is kept from a key (a key the controller could read is refused at run time,
+    hexbench.evaluation.isolation.seed_key_problem). A controller that ran as the evaluating user
+    or as root without Landlock could have read it, so its record ranks as public seeds do."""
+    if isolation.get("mode") == "bubblewrap":
+        return True
+    return isolation.get("mode") == "process" and (isolation.get("user") == "nobody"
+                                                   or bool(isolation.get("landlock_abi")))
 
 
 # ---------------------------------------------------------------------------------- rows
