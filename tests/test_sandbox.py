@@ -388,3 +388,23 @@ def test_a_root_controller_process_that_stays_root_keeps_no_capability():
     caps = {line.split(":")[0]: int(line.split(":")[1], 16) for line in status.splitlines() if line.startswith("Cap")}
     assert caps["CapEff"] == caps["CapPrm"] == caps["CapBnd"] == caps["CapAmb"] == 0, caps
     assert "Uid:\t0\t0\t0\t0" in status  # still root, without the power of root
+
+
+def test_the_controller_host_refuses_to_set_up_its_sandbox_with_other_threads_running():
+    """seccomp and Landlock bind the thread that installs them: a thread started earlier would run
+    unfiltered, so the host refuses to go on, as one error message."""
+    import subprocess
+    import sys
+
+    code = textwrap.dedent("""
+        import os, threading, time
+        from hexbench.evaluation import controller_host, wire
+        threading.Thread(target=time.sleep, args=(10,), daemon=True).start()
+        to_host_r, to_host_w = os.pipe()
+        from_host_r, from_host_w = os.pipe()
+        controller_host.main(["host", str(to_host_r), str(from_host_w), "on", "off"])
+        kind, payload = wire.Inbox(from_host_r).recv()
+        print(kind.decode(), payload.decode())
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO).stdout
+    assert out.startswith("E ") and "threads before its sandbox is set up" in out, out

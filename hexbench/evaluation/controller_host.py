@@ -195,6 +195,12 @@ def wire_json(payload: bytes) -> dict:
 def main(argv: list[str]) -> None:
     in_fd, out_fd, seccomp = int(argv[1]), int(argv[2]), argv[3] if len(argv) > 3 else "on"
     landlock = argv[4] if len(argv) > 4 else "off"
+    threads = len(os.listdir("/proc/self/task"))
+    if threads != 1:  # seccomp and Landlock bind the thread that installs them (and its later threads)
+        wire.write_all(out_fd, wire.frame(wire.ERROR, wire.json_payload(
+            {"type": "SandboxError", "message": f"the controller process runs {threads} threads before its "
+                                                "sandbox is set up; it must run one"})))
+        return
     if landlock != "off":
         try:  # binds libc while it may still be looked up (ctypes runs ldconfig: a new process)
             from py_landlock import get_abi_version
