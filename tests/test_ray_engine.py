@@ -355,3 +355,9 @@ def test_verify_replays_on_the_cluster_as_it_does_locally_and_catches_a_flipped_
     caught = verify_on_ray(forged)
     assert caught.returncode == 1 and log.name in caught.stderr, caught.stderr
     assert len([line for line in caught.stderr.splitlines() if line.startswith("error")]) == 1
+    # a log that is a pipe: the cluster's line names it as the local one does, not as missing
+    log.unlink()
+    os.mkfifo(log)
+    piped = verify_on_ray(forged)
+    errors = [line for line in piped.stderr.splitlines() if line.startswith("error")]
+    assert piped.returncode == 1 and len(errors) == 1 and "is a pipe" in errors[0] and log.name in errors[0], piped.stderr

@@ -182,6 +182,37 @@ def test_resume_takes_a_journal_entry_only_if_its_action_log_replays_into_it(tmp
     assert json.loads(entry_file.read_text())["row"]["progress_m"] == honest
 
 
+class _NodesWithoutTheRunFolder:
+    """A stand-in for a cluster engine: each item runs where the run folder cannot be seen (it is
+    moved away meanwhile), as on a Ray node of another machine."""
+
+    name = "ray"
+
+    def __init__(self, run_dir: Path):
+        self.run_dir = run_dir
+
+    def map(self, fn, items, workers, advance, stop=None, resources=None):
+        away = self.run_dir.with_name(self.run_dir.name + "-away")
+        self.run_dir.rename(away)
+        try:
+            return [fn(item) for item in items]
+        finally:
+            away.rename(self.run_dir)
+
+
+def test_on_a_cluster_the_logs_travel_with_the_episodes_and_a_refused_log_says_why(run, tmp_path):
+    from hexbench.evaluation import engines
+
+    copied = _copy(run, tmp_path)
+    with engines.using(_NodesWithoutTheRunFolder(copied)):
+        assert verify_run(copied).ok
+        log = sorted((copied / "episodes").glob("*.actions"))[0]
+        log.unlink()
+        os.mkfifo(log)
+        report = verify_run(copied)
+    assert not report.ok and log.name in report.message and "is a pipe" in report.message, report.message
+
+
 def _make_hostile(path: Path, how: str, size_bytes: int) -> None:
     """Replace `path` by something reading would choke on: a pipe (open waits for a writer), a
     device (endless bytes), a sparse file past its format's bound, or JSON nested past the parser."""

@@ -196,9 +196,12 @@ def check_seeds(record: dict, seed_set: SeedSet | None) -> str | None:
 
 def _replay_one(args: tuple) -> str | None:
     """One episode replayed from its action log: None, or the first mismatch as one line. The log is
-    read from `log_dir`, or (on a Ray node, which has no run folder) given as bytes."""
+    read from `log_dir`, or (on a Ray node, which has no run folder) given as bytes, or as the
+    reason the driver could not read it."""
     protocol, row, log_dir, log_bytes = args
     task = load_suite(protocol).task(row["terrain"], float(row["level"]))
+    if isinstance(log_bytes, str):
+        return f"{_episode_name(row, task.unit)}: {log_bytes}"
     try:
         if log_bytes is None:
             replayed = replay_row(task, row, Path(log_dir))
@@ -212,16 +215,18 @@ def _replay_one(args: tuple) -> str | None:
     return None if diff is None else f"{_episode_name(row, task.unit)}: {diff}"
 
 
-def _log_bytes(log_dir: Path, row: dict) -> bytes | None:
-    """The bytes of a row's action log, to ship to a Ray node (None if it has none: the replay says so)."""
+def _log_bytes(log_dir: Path, row: dict) -> bytes | str | None:
+    """The bytes of a row's action log, to ship to a Ray node; why it cannot be read (a pipe, a
+    device, too large: the line a local replay gives); None if the row names none (the replay
+    says so)."""
     name = row.get("action_log_path")
     path = log_dir / str(name)
     if not name or Path(str(name)).name != name:
         return None
     try:
         return read_bytes_bounded(path, MAX_ACTION_LOG_BYTES, "action log")
-    except InputError:
-        return None
+    except InputError as e:
+        return str(e)
 
 
 def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random.Generator | None = None,
