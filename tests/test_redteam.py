@@ -93,8 +93,9 @@ CASES: dict[str, Case] = {
     "attack_evaluator_memory": Case(HONEST),
     "attack_evaluator_memory@process": Case(HONEST, extra_args=PROCESS),
     "attack_read_seed_key": Case(HONEST, seed_key=True, needs_bwrap=True),
-    # refused where the controller process could read the key; where it runs as nobody and nobody
-    # cannot (a root evaluator, the key under the test's owner-only folder) it must score honestly
+    # refused where the controller process could read the key; where Landlock leaves the key out, or
+    # the controller runs as nobody and nobody cannot read it (the test's owner-only folder), it
+    # must score honestly
     "attack_read_seed_key@process": Case(EITHER, seed_key=True, extra_args=PROCESS, error_words=("--seed-key",)),
     "attack_write_outside": Case(EITHER, needs_bwrap=True),
     "attack_write_outside@process": Case(EITHER, needs_landlock=True, extra_args=PROCESS),

@@ -3,9 +3,9 @@
 Started by `hexbench.evaluation.sandbox` as `python -I -B -m hexbench.evaluation.controller_host IN_FD OUT_FD` inside the
 sandbox. It first forbids itself new processes, network sockets and any reach into other processes
 (seccomp, where libseccomp is available: a filter no later code can lift) and, under process
-isolation where the kernel has Landlock, every file but those the sandbox would show, then imports the controller file and answers the
-evaluator's messages (hexbench.evaluation.wire): build a controller per task, reset it, and turn each
-observation into an action. Everything it sends is plain data: the action's dtype, shape and
+isolation where the kernel has Landlock, every file but those the sandbox would show; then it
+imports the controller file and answers the evaluator's messages (hexbench.evaluation.wire): build
+a controller per task, reset it, and turn each observation into an action. Everything it sends is plain data: the action's dtype, shape and
 bytes, never an object; the evaluator checks it all again.
 
 This module is the only hexbench code that runs in the untrusted process; the controller can
@@ -195,7 +195,7 @@ def wire_json(payload: bytes) -> dict:
 def main(argv: list[str]) -> None:
     in_fd, out_fd, seccomp = int(argv[1]), int(argv[2]), argv[3] if len(argv) > 3 else "on"
     landlock = argv[4] if len(argv) > 4 else "off"
-    threads = len(os.listdir("/proc/self/task"))
+    threads = len(os.listdir("/proc/self/task")) if os.path.isdir("/proc/self/task") else 1
     if threads != 1:  # seccomp and Landlock bind the thread that installs them (and its later threads)
         wire.write_all(out_fd, wire.frame(wire.ERROR, wire.json_payload(
             {"type": "SandboxError", "message": f"the controller process runs {threads} threads before its "
