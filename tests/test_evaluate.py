@@ -291,3 +291,35 @@ def test_resume_reruns_episodes_whose_weights_changed(tmp_path):
     assert journal.stat().st_mtime_ns != first  # new weights: run again, not mixed into the record
     sha = res.record["controller"]["checkpoints"][0]["sha256"]
     assert json.loads(journal.read_text())["weights"][0]["sha256"] == sha
+
+
+@pytest.mark.parametrize("edited", ["controller", "weights"])
+def test_a_controller_or_weights_file_edited_mid_run_stops_the_run(tmp_path, edited):
+    """A record names one controller and one set of weights: a file edited while the run goes on
+    (here by the controller itself, in-process) would have had some episodes played with other
+    code or weights, so the run stops with one line and writes no record."""
+    (tmp_path / "weights.bin").write_bytes(b"first weights")
+    ctrl_file = tmp_path / "editing.py"
+    target = "HERE" if edited == "controller" else "HERE.with_name('weights.bin')"
+    ctrl_file.write_text(
+        "import numpy as np\n"
+        "from pathlib import Path\n"
+        "HERE = Path(__file__)\n"
+        "class Editing:\n"
+        "    action_mode = 'cpg_residual'\n"
+        "    checkpoint_paths = [HERE.with_name('weights.bin')]\n"
+        "    def reset(self, seed):\n"
+        "        self.steps = 0\n"
+        "    def act(self, obs):\n"
+        "        self.steps += 1\n"
+        "        if self.steps == 5:\n"
+        f"            {target}.write_text('# edited during the run')\n"
+        "        return np.zeros(18, dtype=np.float32)\n"
+        "def make_controller(task):\n"
+        "    return Editing()\n")
+    task = replace(load_suite("v1").task("stairs", 2), episodes=2, max_steps=30)
+    out = tmp_path / "run"
+    res = evaluate(str(ctrl_file), [task], out, workers=1, record=False, progress=False, isolation="none")
+    assert res.error is not None and "changed during the run" in res.error, res.error
+    assert ("weights file" in res.error) == (edited == "weights")
+    assert not (out / "result.json").exists()

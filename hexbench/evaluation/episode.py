@@ -16,7 +16,9 @@ from hexbench.artifacts import action_log
 from hexbench.artifacts.files import make_folder, sha256_file
 from hexbench.artifacts.provenance import HEXBENCH_VERSION
 from hexbench.artifacts.records import ROW_FIELDS
+from hexbench.errors import HexbenchError
 from hexbench.evaluation import sandbox
+from hexbench.suite.controller import MAX_CONTROLLER_FILE_BYTES, ControllerError
 from hexbench.suite.rollout import LoggedActions, play
 from hexbench.suite.seeds import controller_seed
 from hexbench.suite.tasks import TaskSpec, format_level
@@ -38,6 +40,7 @@ class EpisodeJob:
     secret_hex: str = ""  # the run secret controller seeds are derived from ("" : a fixed one, for checks)
     make_timeout_s: float = sandbox.DEFAULT_LIMITS.make_timeout_s
     hidden: tuple[str, ...] = ()  # paths the controller must never see (the run folder, a seed key)
+    controller_sha256: str = ""  # the controller file's sha256 when the run started ("": not checked)
 
     @property
     def episode_id(self) -> str:
@@ -63,7 +66,12 @@ def _make_recorder(job: EpisodeJob, action_mode: str):
 
 
 def run_episode(job: EpisodeJob) -> dict:
-    """Play one episode; return its outcome row. Raises ControllerError for a bad controller."""
+    """Play one episode; return its outcome row. Raises ControllerError for a bad controller, or for
+    a controller file that is no longer the one the run started with."""
+    if job.controller_sha256:
+        problem = controller_changed(job.controller_file, job.controller_sha256)
+        if problem:
+            raise ControllerError(problem)
     actor = sandbox.controller_for(job.controller_file, job.task, job.isolation, job.limits, job.hidden)
     recorder = _make_recorder(job, actor.action_mode)
     secret = bytes.fromhex(job.secret_hex) if job.secret_hex else b"hexbench-check"
@@ -85,6 +93,21 @@ def run_episode(job: EpisodeJob) -> dict:
     finally:
         if recorder is not None:
             recorder.abort()
+
+
+def controller_changed(controller_file: str, started_sha256: str) -> str | None:
+    """Why `controller_file` is not the file a run started with (its sha256 then), or None. A run's
+    record names one controller: a file edited mid-run (or, on a cluster, another version on a
+    node) would have played some episodes with other code, and a new controller process would
+    have been started for it."""
+    try:
+        now = sha256_file(controller_file, MAX_CONTROLLER_FILE_BYTES, "controller file")
+    except (OSError, HexbenchError) as e:
+        return f"{controller_file}: can no longer be read during the run ({' '.join(str(e).split())[:200]})"
+    if now == started_sha256:
+        return None
+    return (f"{controller_file}: changed during the run (sha256 {started_sha256[:12]} at its start, {now[:12]} now); "
+            f"its episodes would come from two versions of it: run it again")
 
 
 def replay_row(task: TaskSpec, row: dict, log_dir: Path, max_steps: int | None = None) -> dict:

@@ -37,9 +37,9 @@ from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit, machine_
 from hexbench.artifacts.records import episode_record_rows, episodes_digest, validate_record
 from hexbench.errors import HexbenchError, InputError, OutputError
 from hexbench.evaluation import engines, sandbox
-from hexbench.evaluation.episode import EpisodeJob, first_row_difference, replay_row
+from hexbench.evaluation.episode import EpisodeJob, controller_changed, first_row_difference, replay_row
 from hexbench.evaluation.isolation import hide_from_controllers, seed_key_problem
-from hexbench.suite.controller import ControllerError, controller_file_problem
+from hexbench.suite.controller import MAX_CONTROLLER_FILE_BYTES, ControllerError, controller_file_problem
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedKeyError, SeedSet, run_secret
 from hexbench.suite.tasks import TaskSpec
@@ -50,7 +50,7 @@ from hexbench.suite.tasks import TaskSpec
 def build_record(*, label: str, controller_file: str, action_mode: str, tasks: list[TaskSpec], rows: list[dict],
                  started_at: str, wall_time_s: float, workers: int, command: str, checkpoints: list[dict],
                  commit: str, isolation: dict | None = None, seed_set: dict | None = None,
-                 engine: dict | None = None) -> dict:
+                 engine: dict | None = None, controller_sha256: str | None = None) -> dict:
     units = {t.terrain: t.unit for t in tasks}
     headroom = {(t.terrain, t.level): t.headroom for t in tasks}
     episodes = episode_record_rows(rows)
@@ -60,7 +60,8 @@ def build_record(*, label: str, controller_file: str, action_mode: str, tasks: l
         "protocol": tasks[0].protocol,
         "label": label,
         "kind": "measured",
-        "controller": {"file": controller_file, "sha256": sha256_file(controller_file), "action_mode": action_mode,
+        "controller": {"file": controller_file, "sha256": controller_sha256 or sha256_file(controller_file),
+                       "action_mode": action_mode,
                        "checkpoints": checkpoints},
         "provenance": {"hexbench_version": HEXBENCH_VERSION, "git_commit": commit, "command": command,
                        "machine": machine_info(), "started_at": started_at, "wall_time_s": wall_time_s,
@@ -123,6 +124,19 @@ def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: 
             files[shown] = {"path": shown, "sha256": sha256_file(path, limits.address_space_bytes, "weights file")}
         used[task.terrain] = [files[k] for k in sorted(files)]
     return used
+
+
+def _weights_changed(controller_file: str, weights: dict[str, list[dict]], limits) -> str | None:
+    """Why a weights file the record names is no longer the one hashed when the run started, or None."""
+    for entry in {w["path"]: w for ws in weights.values() for w in ws}.values():
+        try:
+            now = sha256_file(entry["path"], limits.address_space_bytes, "weights file")
+        except (OSError, HexbenchError):
+            now = None
+        if now != entry["sha256"]:
+            return (f"{controller_file}: its weights file {entry['path']} changed during the run (or can no longer be "
+                    f"read); its episodes would come from two versions of it: run it again")
+    return None
 
 
 @dataclass
@@ -255,6 +269,8 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
     # the journal (run secret) and the logs are hidden from the controller, and so is a seed key
     hidden = tuple(str(p) for p in (out.resolve() / ".journal", out.resolve() / "episodes", seed_set.source)
                    if p is not None)
+    # the code the record names: every episode checks it is still this file (`controller_changed`)
+    started_sha256 = sha256_file(controller_file, MAX_CONTROLLER_FILE_BYTES, "controller file")
     weights = _weights_by_terrain(controller_file, tasks, mode, limits, hidden)
     action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits, hidden).action_mode
     if workers > 1:
@@ -262,11 +278,12 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
     checkpoints = sorted({w["path"]: w for ws in weights.values() for w in ws}.values(), key=lambda w: w["path"])
     secret = run_secret(out / ".journal")
     started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    journal = _Journal(out / ".journal", out, sha256_file(controller_file), weights, seed_set.record(),
+    journal = _Journal(out / ".journal", out, started_sha256, weights, seed_set.record(),
                        f"{started_at}/{os.getpid()}", started_at, time.perf_counter(), written)
     record_dir = str(out / "episodes") if record else None
     jobs = [EpisodeJob(controller_file, t, i, s, record_dir, max_steps=max_steps, log_dir=str(out / "episodes"),
-                       isolation=mode, secret_hex=secret.hex(), make_timeout_s=limits.make_timeout_s, hidden=hidden)
+                       isolation=mode, secret_hex=secret.hex(), make_timeout_s=limits.make_timeout_s, hidden=hidden,
+                       controller_sha256=started_sha256)
             for t in tasks for i, s in enumerate(seed_set.seeds(t, episodes))]
     done: dict[str, dict] = {}
     timing: dict[str, tuple[str, str, float]] = {}  # episode id -> (invocation, its start, elapsed [s] at journaling)
@@ -285,13 +302,16 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
     engine = engines.current()
     engine_record = {"name": engine.name, "description": engine.describe()}  # where the run started (nodes may leave)
     _play_all(engine, todo, len(jobs), workers, label, progress, finished)
+    problem = controller_changed(controller_file, started_sha256) or _weights_changed(controller_file, weights, limits)
+    if problem:
+        raise ControllerError(problem)
     rows = [done[j.episode_id] for j in jobs]
     run_started_at, wall_time_s = run_time([*timing.values(), (journal.invocation, started_at,
                                                                time.perf_counter() - journal.t0)])
     rec = build_record(label=label, controller_file=controller_file, action_mode=action_mode, tasks=tasks, rows=rows,
                        started_at=run_started_at, wall_time_s=wall_time_s, workers=workers, command=command,
                        checkpoints=checkpoints, commit=commit, isolation=sandbox.isolation_record(mode, limits, controller_file),
-                       seed_set=seed_set.record(), engine=engine_record)
+                       seed_set=seed_set.record(), engine=engine_record, controller_sha256=started_sha256)
     import pandas as pd
 
     ordered = sorted(jobs, key=lambda j: (j.task.terrain, j.task.level, j.index))
