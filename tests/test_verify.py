@@ -157,6 +157,17 @@ def test_a_seed_key_the_controller_could_read_is_refused_before_any_episode(tmp_
     assert not (tmp_path / "keyed").exists()
 
 
+def test_a_seed_key_is_refused_in_process(tmp_path, tiny_protocol):
+    key = tmp_path / "key"
+    key.write_bytes(b"k" * 32)
+    res = CliRunner().invoke(app, ["run", CPG, "--terrain", "stairs", "--levels", "2", "--episodes", "1",
+                                   "--workers", "1", "--no-record", "--out", str(tmp_path / "keyed"),
+                                   "--seed-key", str(key), "--isolation", "none"])
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert res.exit_code == 1 and len(lines) == 1 and "--isolation none" in lines[0], res.output
+    assert not (tmp_path / "keyed").exists()
+
+
 @pytest.mark.skipif(not landlock_abi(), reason="needs Landlock (Linux 5.13+) to keep the key from the controller")
 def test_landlock_hides_a_seed_key_even_in_the_controllers_own_folder(tmp_path, tiny_protocol):
     """The red-team controller that finds the key through the evaluator's command line and shows

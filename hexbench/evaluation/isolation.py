@@ -313,12 +313,16 @@ def hide_from_controllers() -> None:
 
 def seed_key_problem(mode: str, controller_file: str | Path, key_file: str | Path | None) -> str | None:
     """Why a controller process under `mode` could read the seed key `key_file` (then hidden seeds
-    would be no secret to it), or None. Under bubblewrap the key is covered up. Under process
+    would be no secret to it), or None. In-process (`none`) the controller shares the evaluator's
+    memory, key and all. Under bubblewrap the key is covered up. Under process
     isolation Landlock, where the kernel has it, leaves the key out of what the controller may
     open; without Landlock only `nobody`, the controller's user under a root evaluator, can be
     kept from a key (one that others cannot read)."""
-    if key_file is None or mode != "process":
+    if key_file is None or mode == "bubblewrap":
         return None
+    if mode == "none":
+        return (f"{controller_file}: --seed-key with --isolation none: the controller would run inside the "
+                f"evaluator, which holds the key; hidden seeds need a sandbox (--isolation bubblewrap or process)")
     if runs_as_nobody(controller_file) and not readable_by_others(Path(key_file)):
         return None
     if landlock_abi():  # the key is one of the paths its rules leave out (`landlock_rules`)
