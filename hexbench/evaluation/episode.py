@@ -60,7 +60,8 @@ def _make_recorder(job: EpisodeJob, action_mode: str):
         "episode_id": job.episode_id, "protocol": job.task.protocol, "terrain": job.task.terrain,
         "level": job.task.level, "unit": job.task.unit, "index": job.index, "seed": job.seed,
         "action_mode": action_mode, "controller_file": job.controller_file,
-        "controller_sha256": sha256_file(job.controller_file), "hexbench_version": HEXBENCH_VERSION,
+        "controller_sha256": job.controller_sha256 or sha256_file(job.controller_file),
+        "hexbench_version": HEXBENCH_VERSION,
     }
     return make_episode_recorder(Path(job.record_dir), job.episode_id, meta)
 

@@ -38,7 +38,7 @@ from hexbench.artifacts.records import episode_record_rows, episodes_digest, val
 from hexbench.errors import HexbenchError, InputError, OutputError
 from hexbench.evaluation import engines, sandbox
 from hexbench.evaluation.episode import EpisodeJob, controller_changed, first_row_difference, replay_row
-from hexbench.evaluation.isolation import hide_from_controllers, seed_key_problem
+from hexbench.evaluation.isolation import seed_key_problem
 from hexbench.suite.controller import MAX_CONTROLLER_FILE_BYTES, ControllerError, controller_file_problem
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedKeyError, SeedSet, run_secret
@@ -249,8 +249,6 @@ def evaluate(controller_file: str | Path, tasks: list[TaskSpec], out_dir: str | 
     key_problem = seed_key_problem(mode, controller_file, seed_set.source if seed_set.key is not None else None)
     if key_problem:
         raise SeedKeyError(key_problem)
-    if mode == "process":
-        hide_from_controllers()  # before any controller process starts (workers do the same)
     created = _prepare_out(out)
     written: list[Path] = []
     try:

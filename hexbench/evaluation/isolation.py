@@ -306,8 +306,9 @@ def hide_from_controllers() -> None:
     """Make this evaluating process not dumpable: a controller process running as the same user
     (`--isolation process` under a non-root evaluator) can then neither read nor write its memory
     (/proc/PID/mem), nor open its files (/proc/PID/fd) or read its environment. Set in every process
-    that plays or collects episodes of a process-isolated controller, before any controller starts
-    (a /proc file opened earlier would stay usable). Costs core dumps and same-user debuggers."""
+    that starts a process-isolated controller (`ControllerProcess`, the run's main process among
+    them), and in every pool worker of such a run before any worker's controller starts (a /proc
+    file opened earlier would stay usable). Costs core dumps and same-user debuggers."""
     _libc().prctl(PR_SET_DUMPABLE, 0, 0, 0, 0)
 
 
@@ -323,11 +324,12 @@ def seed_key_problem(mode: str, controller_file: str | Path, key_file: str | Pat
     if mode == "none":
         return (f"{controller_file}: --seed-key with --isolation none: the controller would run inside the "
                 f"evaluator, which holds the key; hidden seeds need a sandbox (--isolation bubblewrap or process)")
-    if runs_as_nobody(controller_file) and not readable_by_others(Path(key_file)):
+    as_nobody = runs_as_nobody(controller_file)
+    if as_nobody and not readable_by_others(Path(key_file)):
         return None
     if landlock_abi():  # the key is one of the paths its rules leave out (`landlock_rules`)
         return None
-    if runs_as_nobody(controller_file):
+    if as_nobody:
         return (f"{controller_file}: --seed-key {key_file}: the controller process runs as nobody, who can read that key; "
                 f"keep the key where others cannot read it (chmod o-r), or use bubblewrap isolation")
     who = "root" if os.geteuid() == 0 else "you"
