@@ -66,6 +66,7 @@ class Case:
     # default layout when the file sits in the working directory); "same": the copy's own folder
     sparse_files: tuple[tuple[str, int], ...] = ()  # (name, size [bytes]) of sparse files made beside a copy of the file
     seed_key: bool = False  # run with --seed-key, a key file beside a copy of the file (mode 644, in an owner-only folder)
+    link_outside: bool = False  # beside a copy of the file, a link `outside` to a folder the sandbox does not show
 
 
 TIMEOUT_WORDS = ("timeout", "timed out", "took longer", "deadline", "time limit")
@@ -97,6 +98,8 @@ CASES: dict[str, Case] = {
     # the controller runs as nobody and nobody cannot read it (the test's owner-only folder), it
     # must score honestly
     "attack_read_seed_key@process": Case(EITHER, seed_key=True, extra_args=PROCESS, error_words=("--seed-key",)),
+    "attack_link_outside": Case(HONEST, link_outside=True, out="runs", needs_bwrap=True),
+    "attack_link_outside@process": Case(HONEST, link_outside=True, out="runs", needs_landlock=True, extra_args=PROCESS),
     "attack_write_outside": Case(EITHER, needs_bwrap=True),
     "attack_write_outside@process": Case(EITHER, needs_landlock=True, extra_args=PROCESS),
     "attack_overwrite_source": Case(EITHER, needs_bwrap=True),
@@ -327,7 +330,13 @@ def test_attack_is_contained(name, tmp_path):
     listeners = _Listeners() if name.split("@")[0] == "attack_socket" else None
     problems: list[str] = []
     try:
-        controller = _controller_file(name, tmp_path, listeners, bool(case.out) or case.seed_key, case.sparse_files)
+        controller = _controller_file(name, tmp_path, listeners, bool(case.out) or case.seed_key or case.link_outside,
+                                      case.sparse_files)
+        if case.link_outside:
+            not_shown = tmp_path / "not-shown"
+            not_shown.mkdir()
+            (not_shown / "secret.txt").write_text("not for the controller")
+            (controller.parent / "outside").symlink_to(not_shown)
         out_dir = {"": tmp_path / "out", "runs": controller.parent / "runs" / f"{controller.stem}-v1",
                    "same": controller.parent}[case.out]
         files = [str(controller)] + ([str(CPG)] if case.then_cpg else [])

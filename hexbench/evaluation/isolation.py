@@ -209,7 +209,7 @@ def landlock_rules(controller_dir: Path, scratch: Path, hidden: tuple[str, ...] 
 
 
 def _grant_read(path: Path, hidden: list[Path], rules: dict[str, list[str]]) -> None:
-    """Read rights on `path` (a folder or a file, resolved), except on the hidden paths within it."""
+    """Read rights on `path` (a folder or a file, not a link), except on the hidden paths within it."""
     if any(path == h or h in path.parents for h in hidden):
         return
     inside = [h for h in hidden if path in h.parents]
@@ -224,11 +224,11 @@ def _grant_read(path: Path, hidden: list[Path], rules: dict[str, list[str]]) -> 
         except OSError:
             return
         for entry in entries:
-            try:
-                target = entry.resolve(strict=True)  # a link is granted as what it points at
-            except (OSError, RuntimeError):
-                continue
-            _grant_read(target, hidden, rules)
+            # A link is not followed: the folder is the submitter's, and a link to / would grant all
+            # of it. Its target is readable where some other rule grants it, as in bubblewrap, where
+            # a link leads only to what the sandbox binds.
+            if not entry.is_symlink():
+                _grant_read(entry, hidden, rules)
 
 
 def bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = ()) -> list[str]:
