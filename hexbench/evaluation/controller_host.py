@@ -216,7 +216,8 @@ def main(argv: list[str]) -> None:
         import json
 
         try:
-            restrict_files(json.loads(landlock))
+            with open(landlock) as rules:  # the file hexbench.evaluation.sandbox wrote for this process
+                restrict_files(json.load(rules))
         except Exception as e:  # noqa: BLE001 - the evaluator was told Landlock works here: refuse to go on
             wire.write_all(out_fd, wire.frame(wire.ERROR, wire.json_payload(
                 {"type": "SandboxError", "message": f"the sandbox could not apply its Landlock rules ({type(e).__name__}: {e})"[:500]})))

@@ -175,8 +175,11 @@ class ControllerProcess:
             if drop:
                 os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
                 os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
-            if landlock_abi():
-                host[-1] = json.dumps(landlock_rules(self.path.parent, scratch, self.hidden))
+            if landlock_abi():  # the rules go in a file: one per entry of a folder can outgrow an argument
+                rules = Path(self._tmp) / "landlock-rules.json"
+                rules.write_text(json.dumps(landlock_rules(self.path.parent, scratch, self.hidden)))
+                rules.chmod(0o644)
+                host[-1] = str(rules)
             argv, cwd, env, die = host, str(scratch), clean_env(str(scratch)), True
         drop_capabilities = self.isolation == "process" and os.geteuid() == 0 and not drop
         try:
