@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -157,6 +158,10 @@ def test_resumed_run_time_sums_every_invocation_from_the_earliest_start():
 def test_killed_run_leaves_no_worker_processes(tmp_path, sig):
     import psutil
 
+    def sandbox_folders() -> set[Path]:
+        return set(Path(tempfile.gettempdir()).glob("hexbench-sandbox-*"))
+
+    before = sandbox_folders()
     proc = subprocess.Popen([sys.executable, "-m", "hexbench.cli", "run", CPG, "--terrain", "stairs", "--levels", "2",
                              "--episodes", "4", "--workers", "2", "--no-record", "--out", str(tmp_path / "run")],
                             cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -179,6 +184,13 @@ def test_killed_run_leaves_no_worker_processes(tmp_path, sig):
     _, alive = psutil.wait_procs(workers, timeout=10)
     assert not alive, f"{len(alive)} worker process(es) outlived the killed run"
     assert not (tmp_path / "run" / "result.json").exists()
+    # the killed processes' sandbox folders (stderr, scratch) go when the next run starts a controller
+    left_by_kill = sandbox_folders() - before
+    assert left_by_kill  # its workers had controller processes, whose folders they could not remove
+    subprocess.run([sys.executable, "-m", "hexbench.cli", "run", CPG, *ONE_EPISODE, "--out", str(tmp_path / "next")],
+                   cwd=REPO, check=True, capture_output=True, timeout=120)
+    left = sorted(p.name for p in left_by_kill & sandbox_folders())
+    assert not left, f"sandbox folders of the killed run left behind: {left}"
 
 
 def test_two_workers_give_the_same_record_as_one(tmp_path):

@@ -40,6 +40,7 @@ import os
 import select
 import shutil
 import signal
+import stat
 import subprocess
 import sys
 import tempfile
@@ -77,6 +78,47 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 COUNT_AFTER_S = 0.05
 COUNT_AFTER_CALLS = 64
 SCHEDULER_COUNTERS = Path("/proc/thread-self/schedstat").is_file()  # else waiting is not counted
+_SWEPT: list[int] = []  # how many orphaned sandbox folders this process removed (empty: not yet swept)
+
+
+SANDBOX_FOLDER_PREFIX = "hexbench-sandbox-"  # + the evaluating process's pid + "-": its controller processes' folders
+
+
+def remove_orphaned_sandbox_folders() -> int:
+    """Remove the sandbox folders (stderr, scratch, Landlock rules) that evaluating processes which
+    are gone left in the temporary folder: a process killed with SIGKILL, or a pool worker ended by
+    its orphan watchdog, cannot remove its own. A folder goes only if its name carries the pid of
+    no live process and it is a real folder (not a link) owned by this user or, for a root
+    evaluator, by nobody. Returns how many went."""
+    removed = 0
+    root = Path(tempfile.gettempdir())
+    try:
+        entries = [e for e in os.scandir(root) if e.name.startswith(SANDBOX_FOLDER_PREFIX)]
+    except OSError:
+        return 0
+    owners = {os.geteuid(), SANDBOX_UID} if os.geteuid() == 0 else {os.geteuid()}
+    for entry in entries:
+        pid, sep, _ = entry.name[len(SANDBOX_FOLDER_PREFIX):].partition("-")
+        if not sep or not pid.isdigit() or _process_alive(int(pid)):
+            continue
+        try:
+            status = entry.stat(follow_symlinks=False)
+        except OSError:
+            continue
+        if stat.S_ISDIR(status.st_mode) and status.st_uid in owners:
+            shutil.rmtree(entry.path, ignore_errors=True)
+            removed += 1
+    return removed
+
+
+def _process_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # someone else's process
+        return True
+    return True
 
 
 def _read_proc(path: str) -> bytes:
@@ -158,7 +200,9 @@ class ControllerProcess:
     def _start(self) -> None:
         if not self.path.is_file():
             raise ControllerError(f"{self.file}: no such controller file")
-        self._tmp = tempfile.mkdtemp(prefix="hexbench-sandbox-")
+        if not _SWEPT:  # once per evaluating process
+            _SWEPT.append(remove_orphaned_sandbox_folders())
+        self._tmp = tempfile.mkdtemp(prefix=f"{SANDBOX_FOLDER_PREFIX}{os.getpid()}-")
         self._stderr = open(Path(self._tmp) / "stderr", "w+b")
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
