@@ -101,13 +101,20 @@ def controller_changed(controller_file: str, started_sha256: str) -> str | None:
     record names one controller: a file edited mid-run (or, on a cluster, another version on a
     node) would have played some episodes with other code, and a new controller process would
     have been started for it."""
+    change = file_change(controller_file, started_sha256, MAX_CONTROLLER_FILE_BYTES, "controller file")
+    return None if change is None else f"{controller_file}: {change}"
+
+
+def file_change(path: str | Path, started_sha256: str, max_bytes: int, what: str) -> str | None:
+    """How a file a run's record names (its controller, a weights file) differs from the one hashed
+    when the run started, ending in what to do; None if it is the same."""
     try:
-        now = sha256_file(controller_file, MAX_CONTROLLER_FILE_BYTES, "controller file")
+        now = sha256_file(path, max_bytes, what)
     except (OSError, HexbenchError) as e:
-        return f"{controller_file}: can no longer be read during the run ({' '.join(str(e).split())[:200]})"
+        return f"can no longer be read during the run ({' '.join(str(e).split())[:200]}): run it again"
     if now == started_sha256:
         return None
-    return (f"{controller_file}: changed during the run (sha256 {started_sha256[:12]} at its start, {now[:12]} now); "
+    return (f"changed during the run (sha256 {started_sha256[:12]} at its start, {now[:12]} now); "
             f"its episodes would come from two versions of it: run it again")
 
 

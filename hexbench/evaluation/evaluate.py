@@ -37,7 +37,7 @@ from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit, machine_
 from hexbench.artifacts.records import episode_record_rows, episodes_digest, validate_record
 from hexbench.errors import HexbenchError, InputError, OutputError
 from hexbench.evaluation import engines, sandbox
-from hexbench.evaluation.episode import EpisodeJob, controller_changed, first_row_difference, replay_row
+from hexbench.evaluation.episode import EpisodeJob, controller_changed, file_change, first_row_difference, replay_row
 from hexbench.evaluation.isolation import seed_key_problem
 from hexbench.suite.controller import MAX_CONTROLLER_FILE_BYTES, ControllerError, controller_file_problem
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
@@ -129,13 +129,9 @@ def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: 
 def _weights_changed(controller_file: str, weights: dict[str, list[dict]], limits) -> str | None:
     """Why a weights file the record names is no longer the one hashed when the run started, or None."""
     for entry in {w["path"]: w for ws in weights.values() for w in ws}.values():
-        try:
-            now = sha256_file(entry["path"], limits.address_space_bytes, "weights file")
-        except (OSError, HexbenchError):
-            now = None
-        if now != entry["sha256"]:
-            return (f"{controller_file}: its weights file {entry['path']} changed during the run (or can no longer be "
-                    f"read); its episodes would come from two versions of it: run it again")
+        change = file_change(entry["path"], entry["sha256"], limits.address_space_bytes, "weights file")
+        if change is not None:
+            return f"{controller_file}: its weights file {entry['path']} {change}"
     return None
 
 

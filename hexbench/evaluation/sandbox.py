@@ -34,6 +34,7 @@ plain data (hexbench.evaluation.wire); actions are checked again by `hexbench.su
 from __future__ import annotations
 
 import dataclasses
+import functools
 import json
 import math
 import os
@@ -78,7 +79,6 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 COUNT_AFTER_S = 0.05
 COUNT_AFTER_CALLS = 64
 SCHEDULER_COUNTERS = Path("/proc/thread-self/schedstat").is_file()  # else waiting is not counted
-_SWEPT: list[int] = []  # how many orphaned sandbox folders this process removed (empty: not yet swept)
 
 
 SANDBOX_FOLDER_PREFIX = "hexbench-sandbox-"  # + the evaluating process's pid + "-": its controller processes' folders
@@ -109,6 +109,12 @@ def remove_orphaned_sandbox_folders() -> int:
             shutil.rmtree(entry.path, ignore_errors=True)
             removed += 1
     return removed
+
+
+@functools.lru_cache(maxsize=1)
+def _remove_orphaned_sandbox_folders_once() -> int:
+    """`remove_orphaned_sandbox_folders`, once per evaluating process (at its first controller)."""
+    return remove_orphaned_sandbox_folders()
 
 
 def _process_alive(pid: int) -> bool:
@@ -200,8 +206,7 @@ class ControllerProcess:
     def _start(self) -> None:
         if not self.path.is_file():
             raise ControllerError(f"{self.file}: no such controller file")
-        if not _SWEPT:  # once per evaluating process
-            _SWEPT.append(remove_orphaned_sandbox_folders())
+        _remove_orphaned_sandbox_folders_once()
         self._tmp = tempfile.mkdtemp(prefix=f"{SANDBOX_FOLDER_PREFIX}{os.getpid()}-")
         self._stderr = open(Path(self._tmp) / "stderr", "w+b")
         to_child_r, self._to_child = os.pipe()
