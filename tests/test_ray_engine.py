@@ -22,6 +22,7 @@ import time
 from importlib.util import find_spec
 from pathlib import Path
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -65,17 +66,31 @@ def test_an_unreachable_cluster_is_one_line_and_exit_2(tmp_path):
 
 
 # ---------------------------------------------------------------------------------- the cluster
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+# Ports for the cluster come from 20000-32767: above Ray's worker ports (10002-19999 by default) and
+# below the kernel's ephemeral range (32768-60999 by default), from which the local end of every
+# outgoing connection is drawn, so no connection of the first node takes a port meant for the second.
+_CLUSTER_PORTS = (20000, 32768)
+_port_rng = np.random.default_rng()
+
+
+def _free_port(port_range: tuple[int, int] | None = None) -> int:
+    """A port that binds on 127.0.0.1 now: the kernel's pick, or a random one in [low, high)."""
+    for _ in range(200):
+        port = 0 if port_range is None else int(_port_rng.integers(*port_range))
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return s.getsockname()[1]
+    raise RuntimeError(f"no free port in {port_range}")
 
 
 def _node_ports() -> list[str]:
     argv = []
     for option in ("node-manager-port", "object-manager-port", "dashboard-agent-listen-port",
                    "dashboard-agent-grpc-port", "runtime-env-agent-port", "metrics-export-port"):
-        argv += [f"--{option}", str(_free_port())]
+        argv += [f"--{option}", str(_free_port(_CLUSTER_PORTS))]
     return argv
 
 
@@ -84,7 +99,7 @@ class Cluster:
 
     def __init__(self):
         self.temp = tempfile.mkdtemp(prefix="hxray", dir="/tmp")  # short: Ray's socket paths must fit 107 bytes
-        self.port = _free_port()
+        self.port = _free_port(_CLUSTER_PORTS)
         self.address = f"127.0.0.1:{self.port}"
         self.env = {**os.environ, "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": secrets.token_hex(32),
                     "RAY_USAGE_STATS_ENABLED": "0",
@@ -96,7 +111,7 @@ class Cluster:
                   "--disable-usage-stats", "--temp-dir", self.temp]
         self.second_node_manager_port = None
         self._ray("start", "--head", "--port", str(self.port), "--include-dashboard=false",
-                  "--dashboard-port", str(_free_port()), *common, *_node_ports())
+                  "--dashboard-port", str(_free_port(_CLUSTER_PORTS)), *common, *_node_ports())
         second = _node_ports()
         self.second_node_manager_port = int(second[second.index("--node-manager-port") + 1])
         self._ray("start", "--address", self.address, *common, *second)
@@ -156,9 +171,20 @@ class Cluster:
                 shutil.rmtree(folder, ignore_errors=True)
 
 
+def _start_cluster(attempts: int = 3) -> Cluster:
+    """A running cluster; a start that fails (a chosen port taken meanwhile by another process) is
+    stopped and made again with new ports and a new temp folder."""
+    for attempt in range(attempts):
+        try:
+            return Cluster()
+        except RuntimeError:
+            if attempt == attempts - 1:
+                raise
+
+
 @pytest.fixture(scope="module")
 def cluster():
-    c = Cluster()
+    c = _start_cluster()
     try:
         yield c
     finally:
