@@ -73,7 +73,8 @@ def run_episode(job: EpisodeJob) -> dict:
         problem = controller_changed(job.controller_file, job.controller_sha256)
         if problem:
             raise ControllerError(problem)
-    actor = sandbox.controller_for(job.controller_file, job.task, job.isolation, job.limits, job.hidden)
+    actor = sandbox.controller_for(job.controller_file, job.task, job.isolation, job.limits, job.hidden,
+                                   job.controller_sha256 or None)
     recorder = _make_recorder(job, actor.action_mode)
     secret = bytes.fromhex(job.secret_hex) if job.secret_hex else b"hexbench-check"
     try:

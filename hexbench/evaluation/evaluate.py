@@ -103,7 +103,7 @@ class RunResult:
 
 
 def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: str, limits,
-                        hidden: tuple[str, ...]) -> dict[str, list[dict]]:
+                        hidden: tuple[str, ...], controller_sha256: str) -> dict[str, list[dict]]:
     """Per terrain, path and sha256 of every weights file the controller loads for it.
 
     A controller lists them in an optional `checkpoint_paths` attribute (the trained baselines
@@ -113,7 +113,7 @@ def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: 
     """
     used: dict[str, list[dict]] = {}
     for task in {t.terrain: t for t in reversed(tasks)}.values():
-        ctrl = sandbox.controller_for(controller_file, task, isolation, limits, hidden)
+        ctrl = sandbox.controller_for(controller_file, task, isolation, limits, hidden, controller_sha256)
         files = {}
         for path in ctrl.checkpoint_paths:
             path = Path(path).resolve()
@@ -265,8 +265,8 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
                    if p is not None)
     # the code the record names: every episode checks it is still this file (`controller_changed`)
     started_sha256 = sha256_file(controller_file, MAX_CONTROLLER_FILE_BYTES, "controller file")
-    weights = _weights_by_terrain(controller_file, tasks, mode, limits, hidden)
-    action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits, hidden).action_mode
+    weights = _weights_by_terrain(controller_file, tasks, mode, limits, hidden, started_sha256)
+    action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits, hidden, started_sha256).action_mode
     if workers > 1:
         sandbox.close_all()  # the workers start their own controller processes
     checkpoints = sorted({w["path"]: w for ws in weights.values() for w in ws}.values(), key=lambda w: w["path"])

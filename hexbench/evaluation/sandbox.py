@@ -489,11 +489,12 @@ _IN_PROCESS: dict[tuple, InProcessController] = {}
 
 
 def controller_for(controller_file: str, task, isolation: str, limits: Limits = DEFAULT_LIMITS,
-                   hidden: tuple[str, ...] = ()):
+                   hidden: tuple[str, ...] = (), sha256: str | None = None):
     """The controller for `task` in this worker: one sandboxed process per (file content, isolation),
     reused across tasks and episodes, or an in-process controller for isolation 'none'. `hidden`
-    paths (the run folder, a seed key) are covered up inside the sandbox."""
-    sha = sha256_file(controller_file) if Path(controller_file).is_file() else ""
+    paths (the run folder, a seed key) are covered up inside the sandbox. `sha256`: the file's, where
+    the caller has just checked it (else it is hashed here)."""
+    sha = sha256 or (sha256_file(controller_file) if Path(controller_file).is_file() else "")
     if isolation == "none":
         key = (str(controller_file), sha, task)
         if key not in _IN_PROCESS:
