@@ -80,23 +80,30 @@ def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None 
     return admitted
 
 
-def _other_records(directory: Path, dest: Path, protocol: str):
-    """(path, record) of every readable record of `protocol` in `directory` other than `dest`."""
-    for path in record_files(directory):
-        if path.resolve() == dest.resolve():
+def _board_records(board: Path, dest: Path, protocol: str) -> dict[Path, list[tuple[Path, dict]]]:
+    """Per folder of the board (main table, courses, Table 5), (path, record) of every readable record
+    of `protocol` other than `dest`: read once for all the checks of one admission."""
+    found: dict[Path, list[tuple[Path, dict]]] = {}
+    for folder in (board, board / COURSES_DIR, board / COURSES_DIR / TABLE5_DIR):
+        found[folder] = []
+        if not folder.is_dir():
             continue
-        try:
-            other = read_record(path)
-        except RecordError:
-            continue
-        if other.get("protocol") == protocol:
-            yield path, other
+        for path in record_files(folder):
+            if path.resolve() == dest.resolve():
+                continue
+            try:
+                other = read_record(path)
+            except RecordError:
+                continue
+            if other.get("protocol") == protocol:
+                found[folder].append((path, other))
+    return found
 
 
-def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest: Path, where: Path) -> None:
-    """RecordError if another record of the same protocol in `directory` already uses one of the labels."""
+def _check_labels_are_free(rows: list[Row], others: list[tuple[Path, dict]], where: Path) -> None:
+    """RecordError if another record of the same protocol in the folder (`others`) already uses one of the labels."""
     new_labels = {r.label for r in rows}
-    for path, other in _other_records(directory, dest, record["protocol"]):
+    for path, other in others:
         other_labels = ({s["label"] for s in other.get("reported", {}).get("series", [])}
                         if other.get("kind") == "reported" else {other.get("label")})
         clash = sorted(new_labels & other_labels)
@@ -104,25 +111,24 @@ def _check_labels_are_free(rows: list[Row], record: dict, directory: Path, dest:
             raise RecordError(f"{where}: label {clash[0]!r} is already used by {path}; choose another label")
 
 
-def _check_episodes_are_new(record: dict, board: Path, dest: Path, where: str) -> None:
+def _check_episodes_are_new(record: dict, board_records: dict[Path, list[tuple[Path, dict]]], where: str) -> None:
     """RecordError if one of the record's episodes is already on the board (main table, courses,
     Table 5) under another label: the same action log (EpisodeClaims)."""
     claims = EpisodeClaims()
-    for folder in (board, board / COURSES_DIR, board / COURSES_DIR / TABLE5_DIR):
-        if folder.is_dir():
-            for path, other in _other_records(folder, dest, record["protocol"]):
-                try:
-                    claims.claim(other, str(path))
-                except RecordError:  # a clash already on the board is `leaderboard build`'s to report
-                    continue
+    for others in board_records.values():
+        for path, other in others:
+            try:
+                claims.claim(other, str(path))
+            except RecordError:  # a clash already on the board is `leaderboard build`'s to report
+                continue
     claims.claim(record, where)
 
 
-def _check_table5_terrains_are_free(row: Row, record: dict, directory: Path, dest: Path, where: Path) -> None:
+def _check_table5_terrains_are_free(row: Row, record: dict, others: list[tuple[Path, dict]], where: Path) -> None:
     """On Table 5's page a label appears once per terrain: RecordError if another record of the same
-    label and protocol in `directory` covers one of this record's terrains."""
+    label and protocol in the folder (`others`) covers one of this record's terrains."""
     terrains = {t["terrain"] for t in row.terrains}
-    for path, other in _other_records(directory, dest, record["protocol"]):
+    for path, other in others:
         clash = sorted(terrains & {e.get("terrain") for e in other.get("episodes", [])})
         if other.get("label") == record["label"] and clash:
             raise RecordError(f"{where}: {record['label']!r} on {clash[0]} is already recorded by {path}; "
@@ -180,16 +186,18 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
     if table5:
         name = table5_file_name(slug(record["label"]), rows[0])
         dest = directory / name
-        _check_table5_terrains_are_free(rows[0], record, directory, dest, result_path)
+        board_records = _board_records(board, dest, protocol)
+        _check_table5_terrains_are_free(rows[0], record, board_records[directory], result_path)
     else:
         name = "paper_reference.json" if record["kind"] == "reported" else f"{slug(record['label'])}.json"
         dest = directory / name
         if name in GENERATED_FILES:
             raise RecordError(f"{result_path}: label {record['label']!r} would overwrite a generated file")
-        _check_labels_are_free(rows, record, directory, dest, result_path)
+        board_records = _board_records(board, dest, protocol)
+        _check_labels_are_free(rows, board_records[directory], result_path)
     if dest.exists() and dest.resolve() != result_path.resolve() and not replace:
         raise RecordError(f"{dest} already exists; pass --replace to overwrite it")
-    _check_episodes_are_new(record, board, dest, str(result_path))
+    _check_episodes_are_new(record, board_records, str(result_path))
     if record["kind"] == "measured":
         record = admit(record, run_dir, str(result_path), sample=sample, workers=workers, seed_set=seed_set,
                        progress=progress)
