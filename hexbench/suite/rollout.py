@@ -20,6 +20,8 @@ from hexbench.errors import HexbenchError
 from hexbench.suite.controller import CAMERA_GROUND_RGB, check_action
 from hexbench.world.env import HexapodEnv
 
+_add_reduce = np.add.reduce
+
 
 class ReplayMismatch(HexbenchError):
     """An action log does not replay into the episode it claims (too short or too long)."""
@@ -107,10 +109,10 @@ def play(task, seed: int, actor, *, index: int = 0, controller_seed: int | None 
             actions[step] = action
             obs, reward, terminated, truncated, info = env.step(action)
             step += 1
-            state = env.robot_state
-            rolls.append(state.base_rpy_rad[0])
-            pitches.append(state.base_rpy_rad[1])
-            energy_j += float(np.sum(np.abs(state.joint_torque_nm * state.joint_vel_rad_per_s))) * dt
+            values = env.robot_state.values  # RobotState's vector: [18:36] joint velocities, [36:54] torques, [61:64] rpy
+            rolls.append(values[61])
+            pitches.append(values[62])
+            energy_j += float(_add_reduce(abs(values[36:54] * values[18:36]))) * dt
             max_abs_y = max(max_abs_y, abs(info["lateral_m"]))
             if recorder is not None:
                 recorder.on_step(env, obs, action, reward, info)
