@@ -48,6 +48,7 @@ from hexbench.artifacts.files import atomic_path, sha256_file
 from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
 from hexbench.errors import HexbenchError
 from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, STEER_MAX_TURN, TARGET_X_INDEX, action_size
+from hexbench.world.sim import _clip
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
@@ -256,6 +257,7 @@ class PolicyController:
                  heading_hold: HeadingHold | None = None):
         self.action_mode = action_mode
         self.policy = policy
+        self._actor = deterministic_actor(policy)
         # the policy decides every this many control steps and its action is held between (as it
         # trained: hexbench.training.wrappers.DecisionInterval)
         self.decision_interval_steps = max(1, int(decision_interval_steps))
@@ -290,39 +292,57 @@ class PolicyController:
         if self.target_horizon_m is not None:
             obs = np.array(obs, copy=True)
             obs[TARGET_X_INDEX] = min(obs[TARGET_X_INDEX], obs[BASE_X_INDEX] + self.target_horizon_m)
-        action = deterministic_action(self.policy, scale_observation(obs))
-        return np.clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        action = self._actor(scale_observation(obs))
+        return _clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
 
 
 def deterministic_action(policy, scaled_obs: np.ndarray) -> np.ndarray:
     """Bit for bit what `policy.predict(scaled_obs, deterministic=True)[0]` returns, for a single
-    observation, at about a sixth of its cost: predict switches the network's mode, checks and
-    converts the observation and builds an action distribution on every call, and every layer is a
-    module call. Here the same torch operations run on the same weight tensors in the same order
-    (`actor_layers`: for PPO the distribution's mode is the action head's output; SAC's is tanh of
-    the mean), so actions, and therefore every episode, are unchanged (tests/test_policy.py compares
-    both on every shipped checkpoint)."""
+    observation (`deterministic_actor`, made for this one call)."""
+    return deterministic_actor(policy)(scaled_obs)
+
+
+def deterministic_actor(policy):
+    """scaled observation -> action: bit for bit what `policy.predict(scaled_obs, deterministic=True)[0]`
+    returns for a single observation, at a fraction of its cost. predict switches the network's
+    mode, checks and converts the observation and builds an action distribution on every call, and
+    every layer is a module call. Here the same torch operations run on the same weight tensors in
+    the same order (`actor_layers`: for PPO the distribution's mode is the action head's output;
+    SAC's is tanh of the mean), so actions, and therefore every episode, are unchanged
+    (tests/test_policy.py compares both on every shipped checkpoint). What does not depend on the
+    observation (the layers, detached from autograd; the action bounds) is looked up once, here: a
+    controller acts at every control step, in a process whose caches the physics has just evicted."""
     import torch
     from stable_baselines3.common.policies import ActorCriticPolicy, BaseModel, BasePolicy
 
     if not isinstance(policy, BasePolicy):  # any other object with SB3's predict signature
-        return policy.predict(scaled_obs, deterministic=True)[0]
-    with torch.no_grad():
-        obs = torch.as_tensor(np.asarray(scaled_obs, dtype=np.float32)[None])
-        layers = actor_layers(policy)
-        if layers is not None:
-            action = obs
+        return lambda scaled_obs: policy.predict(scaled_obs, deterministic=True)[0]
+    layers = actor_layers(policy)
+    if layers is not None:
+        layers = [(op, weight, bias) if weight is None else (op, weight.detach(), bias.detach())
+                  for op, weight, bias in layers]
+
+        def forward(action):
             for op, weight, bias in layers:
                 action = op(action) if weight is None else op(action, weight, bias)
-        elif isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
+            return action
+    elif isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
+        def forward(obs):
             features = BaseModel.extract_features(policy, obs, policy.pi_features_extractor)
-            action = policy.action_net(policy.mlp_extractor.forward_actor(features))
-        else:  # SAC, TD3: the actor
-            action = policy._predict(obs, deterministic=True)
-    action = action.numpy().reshape(policy.action_space.shape)
-    if policy.squash_output:
-        return policy.unscale_action(action)
-    return np.clip(action, policy.action_space.low, policy.action_space.high)
+            return policy.action_net(policy.mlp_extractor.forward_actor(features))
+    else:  # SAC, TD3: the actor
+        def forward(obs):
+            return policy._predict(obs, deterministic=True)
+    no_grad, as_tensor = torch.no_grad, torch.as_tensor
+    shape, squash = policy.action_space.shape, policy.squash_output
+    low, high = policy.action_space.low, policy.action_space.high
+
+    def act(scaled_obs: np.ndarray) -> np.ndarray:
+        with no_grad():
+            action = forward(as_tensor(np.asarray(scaled_obs, dtype=np.float32)[None])).numpy().reshape(shape)
+        return policy.unscale_action(action) if squash else _clip(action, low, high)
+
+    return act
 
 
 _ACTOR_LAYERS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
