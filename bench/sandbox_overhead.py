@@ -2,7 +2,8 @@
 
     python bench/sandbox_overhead.py                       # PPO-CPG, 6 levels x 4 episodes, 2 workers, 3 rounds
     python bench/sandbox_overhead.py --controller baselines/cpg.py --episodes 2 --rounds 1
-    python bench/sandbox_overhead.py --per-step                 # one pinned worker: act() apart from the rest,
+    python bench/sandbox_overhead.py --per-step                 # one pinned worker: act(), the action check,
+    #                                                             the env step (its physics) and the rest of the loop,
     #                                                             and each process's CPU, switches and faults per step
     python bench/sandbox_overhead.py --per-step --cores 2       # the same on two cores at once, as `hexbench run` loads them
 
@@ -91,21 +92,37 @@ def round_trip_us(isolation: str, pinned: bool, calls: int = 3000) -> float:
     return statistics.median(times) * 1e6
 
 
-class _TimedActor:
-    """Wraps an episode's controller and sums the wall time of its act() calls [s]."""
+class _StepTimer:
+    """Sums the wall time [s] of the parts of a control step it wraps, by name."""
 
-    def __init__(self, ctrl):
-        self.ctrl, self.act_s = ctrl, 0.0
+    def __init__(self):
+        self.sums: dict[str, float] = {}
+
+    def wrap(self, name: str, function):
+        sums, clock = self.sums, time.perf_counter
+
+        def timed(*args, **kwargs):
+            t0 = clock()
+            try:
+                return function(*args, **kwargs)
+            finally:
+                sums[name] = sums.get(name, 0.0) + clock() - t0
+
+        return timed
+
+
+class _TimedActor:
+    """Wraps an episode's controller and times its act() calls (the `timer`'s "act")."""
+
+    def __init__(self, ctrl, timer: _StepTimer):
+        self.ctrl, self._act = ctrl, timer.wrap("act", ctrl.act)
         self.action_mode, self.camera = ctrl.action_mode, getattr(ctrl, "camera", None)
 
     def reset(self, seed: int) -> None:
         self.ctrl.reset(seed)
 
     def act(self, obs, step: int):
-        t0 = time.perf_counter()
-        action = self.ctrl.act(obs, step)
-        self.act_s += time.perf_counter() - t0
-        return action
+        return self._act(obs, step)
 
 
 def process_tree_counters(pid: int) -> dict[str, float]:
@@ -136,32 +153,45 @@ def _own_counters() -> dict[str, float]:
 
 
 def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000, 1001)) -> list[dict]:
-    """One worker pinned to one core, episodes of rough 3 cm: per control step, the act() round trip
-    and the rest of the step (physics, checks) [us], after one untimed episode; and per control step
-    the evaluator's and (sandboxed) the controller process's CPU time [us], context switches and
-    minor page faults."""
-    from hexbench.suite.rollout import play
+    """One worker pinned to one core, episodes of rough 3 cm: per control step, the act() round trip,
+    the action check, the env step (and the physics inside it) and the rest of the loop [us], after
+    one untimed episode; and per control step the evaluator's and (sandboxed) the controller
+    process's CPU time [us], context switches and minor page faults."""
+    from hexbench.suite import rollout
 
     task = load_suite("v1").task("rough", 3.0)
     previous = pin_to_core()
+    check_action = rollout.check_action
     try:
         ctrl = sandbox.controller_for(controller, task, isolation)
-        play(task, seeds[0], _TimedActor(ctrl), controller_seed=5)
+        env = rollout.make_env(task, ctrl.action_mode)
+        timer = _StepTimer()
+        rollout.check_action = timer.wrap("check", check_action)  # as the loop calls it
+        env.step = timer.wrap("env_step", env.step)
+        env.sim.step_physics = timer.wrap("physics", env.sim.step_physics)
+        rollout.play(task, seeds[0], _TimedActor(ctrl, timer), controller_seed=5, env=env)
         out = []
         child = getattr(getattr(ctrl, "process", None), "proc", None)
         for seed in seeds:
-            actor = _TimedActor(ctrl)
+            timer.sums.clear()
+            actor = _TimedActor(ctrl, timer)
             before = [_own_counters()] + ([process_tree_counters(child.pid)] if child else [])
             t0 = time.perf_counter()
-            steps = play(task, seed, actor, controller_seed=5).row["steps"]
+            steps = rollout.play(task, seed, actor, controller_seed=5, env=env).row["steps"]
             total = time.perf_counter() - t0
             after = [_own_counters()] + ([process_tree_counters(child.pid)] if child else [])
             counts = [{k: (b[k] - a[k]) / steps * (1e6 if k == "cpu_s" else 1) for k in a} for a, b in zip(before, after)]
-            out.append({"seed": seed, "steps": steps, "step_us": total / steps * 1e6, "act_us": actor.act_s / steps * 1e6,
-                        "rest_us": (total - actor.act_s) / steps * 1e6, "evaluator_per_step": counts[0],
+            part_us = {name: value / steps * 1e6 for name, value in timer.sums.items()}
+            out.append({"seed": seed, "steps": steps, "step_us": total / steps * 1e6, "act_us": part_us["act"],
+                        "check_us": part_us["check"], "env_step_us": part_us["env_step"],
+                        "physics_us": part_us["physics"],
+                        "loop_rest_us": total / steps * 1e6 - part_us["act"] - part_us["check"] - part_us["env_step"],
+                        "rest_us": total / steps * 1e6 - part_us["act"], "evaluator_per_step": counts[0],
                         "controller_process_per_step": counts[1] if child else None})
+        env.close()
         sandbox.close_all()
     finally:
+        rollout.check_action = check_action
         if previous is not None:
             os.sched_setaffinity(0, previous)
     return out
@@ -191,7 +221,9 @@ def report_per_step(controller: str, cores: int) -> None:
         for isolation, r in rounds:
             steps.setdefault(isolation, []).append(r["step_us"])
             print(f"core slot {core} {isolation:<10} seed {r['seed']}: {r['steps']} steps, {r['step_us']:.0f} us per step: "
-                  f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us; "
+                  f"act() {r['act_us']:.0f} us, the rest {r['rest_us']:.0f} us (check {r['check_us']:.0f}, "
+                  f"env step {r['env_step_us']:.0f} of which physics {r['physics_us']:.0f}, "
+                  f"loop {r['loop_rest_us']:.0f}); "
                   + "; ".join(f"{who} CPU {c['cpu_s']:.0f} us, switches {c['voluntary_switches']:.2f} voluntary "
                               f"{c['involuntary_switches']:.2f} involuntary, {c['minor_faults']:.2f} faults"
                               for who, c in (("evaluator", r["evaluator_per_step"]),
