@@ -22,7 +22,6 @@ import time
 from importlib.util import find_spec
 from pathlib import Path
 
-import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -70,13 +69,12 @@ def test_an_unreachable_cluster_is_one_line_and_exit_2(tmp_path):
 # below the kernel's ephemeral range (32768-60999 by default), from which the local end of every
 # outgoing connection is drawn, so no connection of the first node takes a port meant for the second.
 _CLUSTER_PORTS = (20000, 32768)
-_port_rng = np.random.default_rng()
 
 
 def _free_port(port_range: tuple[int, int] | None = None) -> int:
     """A port that binds on 127.0.0.1 now: the kernel's pick, or a random one in [low, high)."""
     for _ in range(200):
-        port = 0 if port_range is None else int(_port_rng.integers(*port_range))
+        port = 0 if port_range is None else port_range[0] + secrets.randbelow(port_range[1] - port_range[0])
         with socket.socket() as s:
             try:
                 s.bind(("127.0.0.1", port))

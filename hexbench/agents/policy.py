@@ -48,7 +48,7 @@ from hexbench.artifacts.files import atomic_path, sha256_file
 from hexbench.artifacts.manifest import CheckpointError, entry_for, verify_checkpoint
 from hexbench.errors import HexbenchError
 from hexbench.world.env import ACTION_MODES, BASE_X_INDEX, OBS_DIM, STEER_MAX_TURN, TARGET_X_INDEX, action_size
-from hexbench.world.sim import _clip
+from hexbench.world.sim import clip_ufunc
 
 ALGOS: tuple[str, ...] = ("ppo", "sac", "td3")
 ACTIVATIONS: tuple[str, ...] = ("relu", "tanh")
@@ -293,7 +293,7 @@ class PolicyController:
             obs = np.array(obs, copy=True)
             obs[TARGET_X_INDEX] = min(obs[TARGET_X_INDEX], obs[BASE_X_INDEX] + self.target_horizon_m)
         action = self._actor(scale_observation(obs))
-        return _clip(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
+        return clip_ufunc(np.asarray(action, dtype=np.float64).reshape(-1), -1.0, 1.0)
 
 
 def deterministic_action(policy, scaled_obs: np.ndarray) -> np.ndarray:
@@ -340,7 +340,7 @@ def deterministic_actor(policy):
     def act(scaled_obs: np.ndarray) -> np.ndarray:
         with no_grad():
             action = forward(as_tensor(np.asarray(scaled_obs, dtype=np.float32)[None])).numpy().reshape(shape)
-        return policy.unscale_action(action) if squash else _clip(action, low, high)
+        return policy.unscale_action(action) if squash else clip_ufunc(action, low, high)
 
     return act
 

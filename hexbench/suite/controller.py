@@ -37,7 +37,7 @@ import numpy as np
 from hexbench.artifacts.files import file_kind, os_reason, sha256_file
 from hexbench.errors import HexbenchError
 from hexbench.world.env import ACTION_MODES
-from hexbench.world.sim import _clip
+from hexbench.world.sim import clip_ufunc
 
 _max_reduce = np.maximum.reduce
 _ACTION_BOUND = 1.0 + 1e-6  # |a| above this is refused; up to it, clipped to [-1, 1]
@@ -165,4 +165,4 @@ def check_action(action, expected_dim: int, where: str) -> np.ndarray:
         if not np.all(np.isfinite(action)):
             raise ControllerError(f"{where}: action contains NaN or infinite values")
         raise ControllerError(f"{where}: action outside [-1, 1] (max |a| = {float(np.max(np.abs(action))):.3g})")
-    return _clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)
+    return clip_ufunc(np.asarray(action, dtype=np.float32), -1.0, 1.0)

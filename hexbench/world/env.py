@@ -42,7 +42,7 @@ from hexbench.world.cpg import LEG_SIDE, CPGParams, HopfCPG
 from hexbench.world.protocol import EpisodeJudge, EpisodeRules
 from hexbench.world.rewards import TABLE1_WEIGHTS, difficulty_factor, reward_terms, total_reward
 from hexbench.world.robot import NUM_JOINTS, JetHexaSpec
-from hexbench.world.sim import PhysicsConfig, Simulation, _clip
+from hexbench.world.sim import PhysicsConfig, Simulation, clip_ufunc
 from hexbench.world.terrain import TERRAIN_KINDS, make_terrain
 
 ACTION_MODES: tuple[str, ...] = ("joint", "cpg_residual", "cpg_params", "cpg_params_wide", "cpg_params_steer")
@@ -272,7 +272,7 @@ class HexapodEnv(gym.Env):
             raise ValueError(f"action has shape {action.shape}; expected {self.action_space.shape}")
         if not math.isfinite(_add_reduce(action)) and not np.all(np.isfinite(action)):
             raise ValueError("action contains NaN or infinite values")
-        a_t, a_c, a_r = self.joint_targets(_clip(action, self._action_low, self._action_high))
+        a_t, a_c, a_r = self.joint_targets(clip_ufunc(action, self._action_low, self._action_high))
         sim = self.sim
         sent = sim.send_targets(a_t)
         sim.step_physics()
@@ -326,7 +326,7 @@ class HexapodEnv(gym.Env):
             obs = base + self._noise_block[k]
         else:
             obs = base.copy()
-        return _clip(obs, _OBS_LOW_64, _OBS_HIGH_64, out=obs).astype(np.float32)
+        return clip_ufunc(obs, _OBS_LOW_64, _OBS_HIGH_64, out=obs).astype(np.float32)
 
     def render(self):
         if self.render_mode != "rgb_array":

@@ -15,10 +15,12 @@ from functools import lru_cache
 
 import numpy as np
 
-try:  # np.clip's ufunc, called directly: np.clip's Python wrapper costs several times the work
-    from numpy._core.umath import clip as _clip
+# np.clip's ufunc, called directly: np.clip's Python wrapper costs several times the work (the same
+# numbers; used on the hot paths of a control step: here, the env, the action check, policy controllers)
+try:
+    from numpy._core.umath import clip as clip_ufunc
 except ImportError:  # numpy < 2
-    from numpy.core.umath import clip as _clip
+    from numpy.core.umath import clip as clip_ufunc
 
 
 def _import_pybullet_quietly():
@@ -146,8 +148,8 @@ class Simulation:
         """Command joint targets (clipped to limits, rate-limited to servo speed); return what was sent."""
         # The clip ufunc is min(max(x, lower), upper), as np.clip; none of these bounds is +-0.0,
         # so there is not even a sign-of-zero tie where it could differ from np.minimum/np.maximum.
-        wanted = _clip(targets_rad, self.joint_lower_rad, self.joint_upper_rad)
-        self._command = self._command + _clip(wanted - self._command, self._step_low_rad, self._step_high_rad)
+        wanted = clip_ufunc(targets_rad, self.joint_lower_rad, self.joint_upper_rad)
+        self._command = self._command + clip_ufunc(wanted - self._command, self._step_low_rad, self._step_high_rad)
         p.setJointMotorControlArray(self.robot_id, self.joint_indices, p.POSITION_CONTROL,
                                     targetPositions=self._command.tolist(), forces=self._forces,
                                     positionGains=self._kp, velocityGains=self._kd, physicsClientId=self.client)
