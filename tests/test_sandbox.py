@@ -408,3 +408,16 @@ def test_the_controller_host_refuses_to_set_up_its_sandbox_with_other_threads_ru
     """)
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, cwd=REPO).stdout
     assert out.startswith("E ") and "threads before its sandbox is set up" in out, out
+
+
+@pytest.mark.parametrize("isolation", ["auto", "process"])
+def test_a_controller_ends_at_once_when_the_run_is_over(tmp_path, isolation, processes_started_here):
+    """After QUIT the controller process ends without the interpreter's teardown: neither its own
+    atexit handlers nor a slow teardown (a torch controller's took 0.6 s) hold up the end of a run."""
+    path = controller(tmp_path, "import atexit, time\natexit.register(time.sleep, 30)\ndef check(self):\n    pass\n")
+    row = run_episode(short_job(path, isolation))
+    assert row["steps"] == 5
+    start = time.monotonic()
+    sandbox.close_all()
+    assert time.monotonic() - start < 1.0  # the grace period alone is 2 s
+    assert processes_started_here() == []
