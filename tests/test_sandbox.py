@@ -2,6 +2,7 @@
 
 import json
 import os
+import tempfile
 import textwrap
 import time
 from pathlib import Path
@@ -421,3 +422,24 @@ def test_a_controller_ends_at_once_when_the_run_is_over(tmp_path, isolation, pro
     sandbox.close_all()
     assert time.monotonic() - start < 1.0  # the grace period alone is 2 s
     assert processes_started_here() == []
+
+
+@pytest.mark.parametrize("where, body, problem", [
+    ("make_controller", "import os\nfor i in range(5):\n    with open(f'big-{i}', 'wb') as f:\n"
+                        "        f.write(bytes(60 << 20))\ndef check(self):\n    pass\n",
+     "wrote more than 256 MiB to its scratch folder"),
+    ("act", "import os\ndef check(self):\n    self.n = getattr(self, 'n', 0) + 1\n    os.makedirs(str(self.n))\n"
+            "    for i in range(100):\n        open(f'{self.n}/{i}', 'w').close()\n",
+     "made more than 10,000 files and folders in its scratch folder"),
+])
+def test_a_controller_that_outgrows_its_scratch_folder_on_disk_is_stopped(tmp_path, where, body, problem,
+                                                                          processes_started_here):
+    """Under process isolation the scratch folder is on the evaluator's disk: its size and number of
+    entries are bounded as bubblewrap's tmpfs is (256 MiB), and the folder is gone with the process."""
+    before = set(Path(tempfile.gettempdir()).glob(f"{sandbox.SANDBOX_FOLDER_PREFIX}{os.getpid()}-*"))
+    path = controller(tmp_path, body)
+    with pytest.raises(sandbox.ControllerError, match=problem) as failure:
+        run_episode(short_job(path, "process", steps=400))
+    assert "\n" not in str(failure.value)
+    assert processes_started_here() == []
+    assert set(Path(tempfile.gettempdir()).glob(f"{sandbox.SANDBOX_FOLDER_PREFIX}{os.getpid()}-*")) <= before

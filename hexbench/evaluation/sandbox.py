@@ -12,7 +12,8 @@ Isolation modes (what every record states, `isolation_record`):
               environment, scratch working folder, `nobody` when the evaluator is root (else root
               without capabilities, or the evaluating user). Where the kernel has Landlock, the
               controller may open only what bubblewrap would show it, and write only its scratch
-              folder (`landlock_rules`); elsewhere the file system is not hidden: it can read and
+              folder (`landlock_rules`), which the evaluator keeps within Limits.scratch_bytes
+              (`check_scratch`); elsewhere the file system is not hidden: it can read and
               write what its user can. The evaluator's processes are made not dumpable (their
               memory, files and environment are out of a same-user controller's reach), and
               seccomp keeps signals, resource limits and tracing to the controller's own process.
@@ -79,6 +80,12 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 COUNT_AFTER_S = 0.05
 COUNT_AFTER_CALLS = 64
 SCHEDULER_COUNTERS = Path("/proc/thread-self/schedstat").is_file()  # else waiting is not counted
+# Under process isolation the scratch folder is on the evaluator's disk, not a sized tmpfs: its size
+# (Limits.scratch_bytes, bubblewrap's tmpfs size) is checked with the CPU-time sample, and every
+# SCRATCH_CHECK_EVERY_S during a call that takes longer. A check stats every entry, so the folder may
+# hold at most SCRATCH_ENTRIES_MAX files and folders (a check then takes a few ms).
+SCRATCH_CHECK_EVERY_S = 0.25
+SCRATCH_ENTRIES_MAX = 10_000
 
 
 SANDBOX_FOLDER_PREFIX = "hexbench-sandbox-"  # + the evaluating process's pid + "-": its controller processes' folders
@@ -145,6 +152,24 @@ def _thread_queued_s() -> float:
         return 0.0
 
 
+def folder_usage(root: str, max_entries: int) -> tuple[int, int]:
+    """(bytes allocated on disk, entries) of the files and folders below `root`, links not followed;
+    counting stops once there are more than `max_entries`."""
+    allocated, entries, pending = 0, 0, [root]
+    while pending and entries <= max_entries:
+        try:
+            with os.scandir(pending.pop()) as listing:
+                for entry in listing:
+                    entries += 1
+                    info = entry.stat(follow_symlinks=False)
+                    allocated += info.st_blocks * 512
+                    if stat.S_ISDIR(info.st_mode):
+                        pending.append(entry.path)
+        except OSError:  # an entry removed while counting
+            continue
+    return allocated, entries
+
+
 def controller_host_boot() -> str:
     """The controller process's program: hexbench's controller host, imported from the package this
     evaluator runs (`python -I` ignores PYTHONPATH, and an installed hexbench may be another checkout
@@ -159,18 +184,23 @@ class _Deadline:
     """When to give up on an answer: CPU time of the controller (from the latest sample, taken when
     the last count of calls ended: it may include some 50 ms of earlier calls) and wall time."""
 
-    def __init__(self, process: "ControllerProcess", cpu_s: float | None, wall_s: float):
-        self.process, self.cpu_s, self.wall_s = process, cpu_s, wall_s
+    def __init__(self, process: "ControllerProcess", cpu_s: float | None, wall_s: float, context: str):
+        self.process, self.cpu_s, self.wall_s, self.context = process, cpu_s, wall_s, context
         self.start = time.monotonic()
         self.expired_on_cpu = False
 
     def wait_s(self) -> float:
-        """Seconds to wait before checking again; 0 when expired."""
+        """Seconds to wait before checking again; 0 when expired. Raises ControllerError when a
+        process-isolation controller has outgrown its scratch folder."""
         elapsed = time.monotonic() - self.start
         if elapsed >= self.wall_s:
             return 0.0
+        watched = self.process.scratch is not None
+        if watched and elapsed >= SCRATCH_CHECK_EVERY_S:
+            self.process.check_scratch(self.context)
         if self.cpu_s is None or elapsed < self.cpu_s:
-            return min(self.wall_s, self.cpu_s or self.wall_s) - elapsed
+            wait_s = min(self.wall_s, self.cpu_s or self.wall_s) - elapsed
+            return min(wait_s, SCRATCH_CHECK_EVERY_S) if watched else wait_s
         used = self.process.cpu_seconds() - self.process._cpu_sample
         if used >= self.cpu_s:
             self.expired_on_cpu = True
@@ -201,6 +231,7 @@ class ControllerProcess:
         self._cpu_sample, self._count_busy_s = 0.0, None
         self._count_wall_s, self._count_calls, self._waited_s = 0.0, 0, 0.0
         self._inbox = bytearray()  # bytes read from the child and not yet taken
+        self.scratch: str | None = None  # the scratch folder the evaluator bounds (process isolation)
         self._start()
 
     def _start(self) -> None:
@@ -230,6 +261,7 @@ class ControllerProcess:
                 rules.chmod(0o644)
                 host[-1] = str(rules)
             argv, cwd, env, die = host, str(scratch), clean_env(str(scratch)), True
+            self.scratch = str(scratch)
         drop_capabilities = self.isolation == "process" and os.geteuid() == 0 and not drop
         try:
             self.proc = subprocess.Popen(argv, pass_fds=(to_child_r, from_child_w), stdin=subprocess.DEVNULL,
@@ -305,6 +337,17 @@ class ControllerProcess:
             except (OSError, ValueError, IndexError):
                 continue
         return ticks / _CLOCK_TICKS, queued_ns / 1e9
+
+    def check_scratch(self, context: str) -> None:
+        """Kill the controller (one ControllerError) if its scratch folder holds more than
+        Limits.scratch_bytes, or more than SCRATCH_ENTRIES_MAX files and folders."""
+        allocated, entries = folder_usage(self.scratch, SCRATCH_ENTRIES_MAX)
+        if allocated > self.limits.scratch_bytes:
+            raise self._fail(f"wrote more than {self.limits.scratch_bytes >> 20} MiB to its scratch folder "
+                             "(the limit of every sandbox's scratch folder)", context + " (controller process killed)")
+        if entries > SCRATCH_ENTRIES_MAX:
+            raise self._fail(f"made more than {SCRATCH_ENTRIES_MAX:,} files and folders in its scratch folder",
+                             context + " (controller process killed)")
 
     def cpu_seconds(self) -> float:
         """CPU time [s] used so far by the controller's process tree."""
@@ -402,7 +445,7 @@ class ControllerProcess:
         elif self._count_busy_s is None:
             self._start_count()
         deadline = _Deadline(self, timeout_s if cpu_limited else None,
-                             self.limits.call_wall_timeout_s if cpu_limited else timeout_s)
+                             self.limits.call_wall_timeout_s if cpu_limited else timeout_s, context)
         try:
             self._send(wire.frame(kind, payload), deadline, context)
             answer, body = self._receive(deadline, context)
@@ -414,6 +457,10 @@ class ControllerProcess:
             self._count_calls += 1
             if self._count_wall_s > COUNT_AFTER_S or self._count_calls >= COUNT_AFTER_CALLS:
                 self._count_waiting(what, context)
+                if self.scratch is not None:
+                    self.check_scratch(context)
+        elif self.scratch is not None:
+            self.check_scratch(context)
         if answer == wire.ERROR:
             try:
                 error = json.loads(body)
