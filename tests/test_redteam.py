@@ -119,6 +119,8 @@ CASES: dict[str, Case] = {
     "attack_wire_make_info": Case(EITHER),
     "attack_stderr_injection": Case(ERROR),
     "attack_tmpfs_fill": Case(HONEST, needs_bwrap=True),
+    "attack_memory_outside_limits": Case(HONEST),
+    "attack_memory_outside_limits@process": Case(HONEST, extra_args=PROCESS),
     "attack_ndarray_subclass": Case(EITHER),
     "attack_huge_message": Case(ERROR, error_words=("shape", "size", "bytes", "large", "long", "length")),
     "attack_os_exit": Case(ERROR, then_cpg=True),

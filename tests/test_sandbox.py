@@ -431,6 +431,10 @@ def test_a_controller_ends_at_once_when_the_run_is_over(tmp_path, isolation, pro
     ("act", "import os\ndef check(self):\n    self.n = getattr(self, 'n', 0) + 1\n    os.makedirs(str(self.n))\n"
             "    for i in range(100):\n        open(f'{self.n}/{i}', 'w').close()\n",
      "made more than 10,000 files and folders in its scratch folder"),
+    ("deleted while open", "import os\nheld = []\nfor i in range(5):\n    held.append(open(f'big-{i}', 'wb'))\n"
+                           "    held[-1].write(bytes(60 << 20))\n    held[-1].flush()\n    os.remove(f'big-{i}')\n"
+                           "def check(self):\n    pass\n",
+     "wrote more than 256 MiB to its scratch folder"),
 ])
 def test_a_controller_that_outgrows_its_scratch_folder_on_disk_is_stopped(tmp_path, where, body, problem,
                                                                           processes_started_here):

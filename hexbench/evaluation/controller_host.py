@@ -32,11 +32,17 @@ AF_UNIX = 1
 SIGNAL_CALLS_BY_TGID = ("kill", "tgkill", "rt_sigqueueinfo", "rt_tgsigqueueinfo")
 OTHER_PROCESS_CALLS = ("ptrace", "process_vm_readv", "process_vm_writev", "tkill", "pidfd_open",
                        "pidfd_send_signal", "pidfd_getfd", "process_madvise", "process_mrelease", "kcmp")
+# memory that no address-space limit counts (a memfd's or a SysV segment's pages are the kernel's
+# until mapped; 256 memfds of 64 MiB each are 16 GiB), and SysV objects, which outlive the process
+# outside an IPC namespace and are shared by id with every process of the same user
+MEMORY_OUTSIDE_LIMITS_CALLS = ("memfd_create", "memfd_secret", "shmget", "shmat", "shmctl", "msgget", "msgsnd",
+                               "msgrcv", "msgctl", "semget", "semop", "semtimedop", "semctl")
 
 
 def forbid_processes_and_network() -> str:
     """Install a seccomp filter: no fork/vfork/clone without CLONE_THREAD, clone3 unavailable (glibc
-    falls back to clone), sockets only of the AF_UNIX family, and no reach into other processes:
+    falls back to clone), sockets only of the AF_UNIX family, no memfds or SysV IPC (memory outside
+    the address-space limit), and no reach into other processes:
     signals only to this process, no resource limits or priority but its own, no tracing, pidfds
     or cross-process memory calls. Under bubblewrap the evaluator is outside the controller's PID
     namespace anyway; under `--isolation process` it may run as the same user, who could otherwise
@@ -60,7 +66,7 @@ def forbid_processes_and_network() -> str:
         flt.add_rule(deny, "prlimit64", seccomp.Arg(0, seccomp.NE, 0))  # getrlimit/setrlimit pass 0: itself
         flt.add_rule(deny, "setpriority", seccomp.Arg(0, seccomp.NE, 0))  # PRIO_PROCESS only ...
         flt.add_rule(deny, "setpriority", seccomp.Arg(1, seccomp.NE, 0))  # ... of itself
-        for call in OTHER_PROCESS_CALLS:
+        for call in OTHER_PROCESS_CALLS + MEMORY_OUTSIDE_LIMITS_CALLS:
             flt.add_rule(deny, call)
         flt.load()
     except Exception:  # noqa: BLE001

@@ -126,7 +126,8 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
         user = "uid 65534 in a user namespace mapped to root, no capabilities" if mode == "bubblewrap" \
             else "root without capabilities (the Python environment is not readable by nobody)"
     record = {"mode": mode, "sandboxed": True,
-              "seccomp": "no new processes, AF_UNIX sockets only, signals and limits to itself only"
+              "seccomp": ("no new processes, AF_UNIX sockets only, signals and limits to itself only, "
+                          "no memfds or SysV IPC")
               if seccomp_available() else "off",
               "user": user,
               "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,

@@ -154,7 +154,7 @@ def _thread_queued_s() -> float:
 
 def folder_usage(root: str, max_entries: int) -> tuple[int, int]:
     """(bytes allocated on disk, entries) of the files and folders below `root`, links not followed;
-    counting stops once there are more than `max_entries`."""
+    counting stops once there are more than `max_entries`. PermissionError if a folder cannot be read."""
     allocated, entries, pending = 0, 0, [root]
     while pending and entries <= max_entries:
         try:
@@ -165,9 +165,23 @@ def folder_usage(root: str, max_entries: int) -> tuple[int, int]:
                     allocated += info.st_blocks * 512
                     if stat.S_ISDIR(info.st_mode):
                         pending.append(entry.path)
-        except OSError:  # an entry removed while counting
+        except FileNotFoundError:  # removed while counting
             continue
     return allocated, entries
+
+
+def deleted_open_files_bytes(pid: int) -> int:
+    """Bytes allocated on disk by the files process `pid` holds open after they were deleted (a
+    folder's size no longer shows them). PermissionError if its open files cannot be listed."""
+    allocated = 0
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        try:
+            info = os.stat(f"/proc/{pid}/fd/{fd}")  # the open file itself
+        except OSError:  # closed meanwhile, or not a file (a pipe's or socket's link may not resolve)
+            continue
+        if info.st_nlink == 0 and stat.S_ISREG(info.st_mode):
+            allocated += info.st_blocks * 512
+    return allocated
 
 
 def controller_host_boot() -> str:
@@ -339,9 +353,17 @@ class ControllerProcess:
         return ticks / _CLOCK_TICKS, queued_ns / 1e9
 
     def check_scratch(self, context: str) -> None:
-        """Kill the controller (one ControllerError) if its scratch folder holds more than
-        Limits.scratch_bytes, or more than SCRATCH_ENTRIES_MAX files and folders."""
-        allocated, entries = folder_usage(self.scratch, SCRATCH_ENTRIES_MAX)
+        """Kill the controller (one ControllerError) if its scratch folder, with the deleted files it
+        still holds open, takes more than Limits.scratch_bytes, or holds more than SCRATCH_ENTRIES_MAX
+        files and folders."""
+        try:
+            allocated, entries = folder_usage(self.scratch, SCRATCH_ENTRIES_MAX)
+            allocated += deleted_open_files_bytes(self.proc.pid)
+        except FileNotFoundError:  # it has just ended (its /proc folder is gone): the next call says how
+            return
+        except OSError:  # a folder made unreadable, or its open files hidden (made not dumpable)
+            raise self._fail("hid part of its scratch folder or its open files from the evaluator's count",
+                             context + " (controller process killed)") from None
         if allocated > self.limits.scratch_bytes:
             raise self._fail(f"wrote more than {self.limits.scratch_bytes >> 20} MiB to its scratch folder "
                              "(the limit of every sandbox's scratch folder)", context + " (controller process killed)")
