@@ -71,6 +71,16 @@ def bubblewrap_version() -> str | None:
 
 
 @lru_cache(maxsize=1)
+def bubblewrap_disables_userns() -> bool:
+    """Whether this bubblewrap can forbid new user namespaces inside its sandbox (`--disable-userns`,
+    bubblewrap 0.8.0 and later): in one of its own a process may mount a tmpfs of any size."""
+    try:
+        return tuple(int(part) for part in (bubblewrap_version() or "").split(".")[:2]) >= (0, 8)
+    except ValueError:
+        return False
+
+
+@lru_cache(maxsize=1)
 def landlock_abi() -> int:
     """The kernel's Landlock ABI version, 0 where Landlock or its binding (py-landlock) is missing.
     Under `--isolation process` Landlock gives the controller the file view of the bubblewrap
@@ -127,7 +137,7 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
             else "root without capabilities (the Python environment is not readable by nobody)"
     record = {"mode": mode, "sandboxed": True,
               "seccomp": ("no new processes, AF_UNIX sockets only, signals and limits to itself only, "
-                          "no memfds or SysV IPC")
+                          "no memfds, SysV IPC, namespaces, mounts or keyrings")
               if seccomp_available() else "off",
               "user": user,
               "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,
@@ -235,6 +245,8 @@ def _grant_read(path: Path, hidden: list[Path], rules: dict[str, list[str]]) -> 
 def bwrap_argv(controller_dir: Path, limits: Limits, hidden: tuple[str, ...] = ()) -> list[str]:
     argv = ["bwrap", "--unshare-all", "--unshare-user", "--uid", str(SANDBOX_UID), "--gid", str(SANDBOX_UID),
             "--cap-drop", "ALL", "--die-with-parent", "--new-session", "--hostname", "sandbox"]
+    if bubblewrap_disables_userns():  # the seccomp filter refuses unshare and mount too: this holds without it
+        argv += ["--disable-userns"]
     for d in SYSTEM_DIRS:
         if os.path.islink(d):
             argv += ["--symlink", os.readlink(d), d]
