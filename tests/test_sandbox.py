@@ -447,3 +447,23 @@ def test_a_controller_that_outgrows_its_scratch_folder_on_disk_is_stopped(tmp_pa
     assert "\n" not in str(failure.value)
     assert processes_started_here() == []
     assert set(Path(tempfile.gettempdir()).glob(f"{sandbox.SANDBOX_FOLDER_PREFIX}{os.getpid()}-*")) <= before
+
+
+@pytest.mark.parametrize("isolation", ["auto", "process"])
+def test_threads_are_bounded_from_outside(tmp_path, isolation, processes_started_here):
+    """No rlimit bounds the threads of a user namespace's root: the evaluator counts them, here after
+    make_controller starts 600 (each waiting) and at once in a call that keeps starting them."""
+    many = controller(tmp_path, "import threading\nthreading.stack_size(64 << 10)\nstop = threading.Event()\n"
+                                "for _ in range(600):\n    threading.Thread(target=stop.wait, daemon=True).start()\n"
+                                "def check(self):\n    pass\n", name="many.py")
+    with pytest.raises(sandbox.ControllerError, match=r"ran \d+ threads, more than the 256 a controller may"):
+        run_episode(short_job(many, isolation))
+    slow = controller(tmp_path, "import threading, time\nthreading.stack_size(64 << 10)\nstop = threading.Event()\n"
+                                "def check(self):\n    while True:\n"
+                                "        threading.Thread(target=stop.wait, daemon=True).start()\n"
+                                "        time.sleep(0.001)\n", name="slow.py")
+    start = time.monotonic()
+    with pytest.raises(sandbox.ControllerError, match=r"threads, more than the 256 a controller may at step 0"):
+        run_episode(short_job(slow, isolation))
+    assert time.monotonic() - start < 5.0
+    assert processes_started_here() == []

@@ -35,6 +35,7 @@ class Limits:
     address_space_bytes: int = 4 << 30
     cpu_time_s: int = 4 * 3600  # RLIMIT_CPU of the controller process, over its whole life
     open_files: int = 256
+    threads: int = 256  # threads of the controller's process tree at once, checked by the evaluator
     file_size_bytes: int = 64 << 20  # largest file it may write (in its scratch folder)
     scratch_bytes: int = 256 << 20  # size of the scratch folder (bubblewrap's tmpfs)
     small_tmpfs_bytes: int = 16 << 20  # size of /tmp and /dev/shm in the sandbox
@@ -141,6 +142,7 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
               if seccomp_available() else "off",
               "user": user,
               "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,
+              "threads": limits.threads,
               "make_timeout_s": limits.make_timeout_s, "call_timeout_s": limits.call_timeout_s,
               "call_wall_timeout_s": limits.call_wall_timeout_s, "wait_free_per_call_s": limits.wait_free_per_call_s,
               "wait_budget_s": limits.wait_budget_s}

@@ -21,7 +21,8 @@ Isolation modes (what every record states, `isolation_record`):
               read is refused (`seed_key_problem`).
   none        the controller runs inside the evaluator (debugging only): it can reach the simulator
               and forge its score; records say so and the leaderboard refuses them.
-In both sandboxed modes: resource limits (address space 4 GiB, CPU time, open files, file size),
+In both sandboxed modes: resource limits (address space 4 GiB, CPU time, open files, file size;
+threads counted by the evaluator, `check_limits`),
 a seccomp filter installed before the controller is imported (no new processes, no sockets but
 AF_UNIX; hexbench.evaluation.controller_host), and deadlines enforced from outside: the evaluator waits for
 each answer with a timeout and kills the controller's whole process tree when it passes. Killing
@@ -80,11 +81,14 @@ _CLOCK_TICKS = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 COUNT_AFTER_S = 0.05
 COUNT_AFTER_CALLS = 64
 SCHEDULER_COUNTERS = Path("/proc/thread-self/schedstat").is_file()  # else waiting is not counted
-# Under process isolation the scratch folder is on the evaluator's disk, not a sized tmpfs: its size
-# (Limits.scratch_bytes, bubblewrap's tmpfs size) is checked with the CPU-time sample, and every
-# SCRATCH_CHECK_EVERY_S during a call that takes longer. A check stats every entry, so the folder may
-# hold at most SCRATCH_ENTRIES_MAX files and folders (a check then takes a few ms).
-SCRATCH_CHECK_EVERY_S = 0.25
+# What no kernel limit bounds here is checked by the evaluator, with each CPU-time sample and every
+# LIMITS_CHECK_EVERY_S during a call that takes longer: the controller's threads (Limits.threads; no
+# rlimit applies to a user namespace's root, and 3,000 threads took 0.33 s to start, against a
+# pid_max of 32,768 on the 2-core VMs), and under process isolation the scratch folder, which is on
+# the evaluator's disk, not a sized tmpfs (Limits.scratch_bytes, bubblewrap's tmpfs size). A check
+# stats every entry of the folder, so it may hold at most SCRATCH_ENTRIES_MAX files and folders (a
+# check then takes a few ms).
+LIMITS_CHECK_EVERY_S = 0.25
 SCRATCH_ENTRIES_MAX = 10_000
 
 
@@ -204,17 +208,15 @@ class _Deadline:
         self.expired_on_cpu = False
 
     def wait_s(self) -> float:
-        """Seconds to wait before checking again; 0 when expired. Raises ControllerError when a
-        process-isolation controller has outgrown its scratch folder."""
+        """Seconds to wait before checking again; 0 when expired. Raises ControllerError when the
+        controller has gone past a limit the evaluator checks (`ControllerProcess.check_limits`)."""
         elapsed = time.monotonic() - self.start
         if elapsed >= self.wall_s:
             return 0.0
-        watched = self.process.scratch is not None
-        if watched and elapsed >= SCRATCH_CHECK_EVERY_S:
-            self.process.check_scratch(self.context)
+        if elapsed >= LIMITS_CHECK_EVERY_S:
+            self.process.check_limits(self.context)
         if self.cpu_s is None or elapsed < self.cpu_s:
-            wait_s = min(self.wall_s, self.cpu_s or self.wall_s) - elapsed
-            return min(wait_s, SCRATCH_CHECK_EVERY_S) if watched else wait_s
+            return min(min(self.wall_s, self.cpu_s or self.wall_s) - elapsed, LIMITS_CHECK_EVERY_S)
         used = self.process.cpu_seconds() - self.process._cpu_sample
         if used >= self.cpu_s:
             self.expired_on_cpu = True
@@ -246,6 +248,7 @@ class ControllerProcess:
         self._count_wall_s, self._count_calls, self._waited_s = 0.0, 0, 0.0
         self._inbox = bytearray()  # bytes read from the child and not yet taken
         self.scratch: str | None = None  # the scratch folder the evaluator bounds (process isolation)
+        self.threads_seen = 0  # the controller's threads at the latest sample (`tree_times`)
         self._start()
 
     def _start(self) -> None:
@@ -333,8 +336,9 @@ class ControllerProcess:
         """CPU time [s] used so far by the controller's process tree (bubblewrap and everything below
         it, exited threads included), and the time its live threads have spent queued for a CPU [s]
         (the scheduler's per-thread counters; 0 where the kernel keeps none, or if not `queued`).
-        Read with plain system calls: about 10 us a file, against 100 us and more through pathlib."""
-        ticks, queued_ns, pending, seen = 0, 0, [self.proc.pid], set()
+        Read with plain system calls: about 10 us a file, against 100 us and more through pathlib.
+        Also keeps the number of the tree's threads in `threads_seen`."""
+        ticks, queued_ns, pending, seen, threads = 0, 0, [self.proc.pid], set(), 0
         queued = queued and SCHEDULER_COUNTERS
         while pending:
             pid = pending.pop()
@@ -344,13 +348,30 @@ class ControllerProcess:
             try:
                 fields = _read_proc(f"/proc/{pid}/stat").rsplit(b")", 1)[1].split()
                 ticks += int(fields[11]) + int(fields[12])  # utime, stime [clock ticks]
+                threads += int(fields[17])  # num_threads
                 for tid in os.listdir(f"/proc/{pid}/task"):
                     if queued:
                         queued_ns += int(_read_proc(f"/proc/{pid}/task/{tid}/schedstat").split()[1])
                     pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
             except (OSError, ValueError, IndexError):
                 continue
+        self.threads_seen = threads
         return ticks / _CLOCK_TICKS, queued_ns / 1e9
+
+    def check_limits(self, context: str) -> None:
+        """Kill the controller (one ControllerError) past a limit the evaluator checks: its threads and,
+        under process isolation, its scratch folder."""
+        self.tree_times(queued=False)
+        self.check_threads(context)
+        if self.scratch is not None:
+            self.check_scratch(context)
+
+    def check_threads(self, context: str) -> None:
+        """Kill the controller (one ControllerError) if the latest sample counted more threads than
+        Limits.threads (bubblewrap's own processes included)."""
+        if self.threads_seen > self.limits.threads:
+            raise self._fail(f"ran {self.threads_seen:,} threads, more than the {self.limits.threads} a controller "
+                             "may", context + " (controller process killed)")
 
     def check_scratch(self, context: str) -> None:
         """Kill the controller (one ControllerError) if its scratch folder, with the deleted files it
@@ -478,11 +499,12 @@ class ControllerProcess:
             self._count_wall_s += time.monotonic() - deadline.start
             self._count_calls += 1
             if self._count_wall_s > COUNT_AFTER_S or self._count_calls >= COUNT_AFTER_CALLS:
-                self._count_waiting(what, context)
+                self._count_waiting(what, context)  # samples the tree's threads too
+                self.check_threads(context)
                 if self.scratch is not None:
                     self.check_scratch(context)
-        elif self.scratch is not None:
-            self.check_scratch(context)
+        else:
+            self.check_limits(context)
         if answer == wire.ERROR:
             try:
                 error = json.loads(body)
