@@ -192,9 +192,14 @@ def register(app: typer.Typer) -> None:
         engine: str = typer.Option("local", "--engine", help="where replays run: local (processes on this machine) "
                                    "or ray (tasks on a Ray cluster; the action logs travel with them)"),
         address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
+        rerun: bool = typer.Option(False, "--rerun", help="then play the same episodes again with the controller the "
+                                   "record names, sandboxed, and check it chooses every recorded action"),
+        controller: str = typer.Option(None, "--controller", help="with --rerun: the controller file, where it is not "
+                                       "at the path the record names (it must be the same file: sha256)"),
     ) -> None:
         """Replay a run's episodes from their action logs alone (never the controller) and check every row,
-        the summaries, the digest and the seeds; the first mismatch is named."""
+        the summaries, the digest and the seeds; the first mismatch is named. With --rerun, the record's
+        controller then plays the same episodes in the sandbox, and every action must be the recorded one."""
 
         from hexbench.errors import HexbenchError
 
@@ -214,9 +219,29 @@ def register(app: typer.Typer) -> None:
             if not report.ok:
                 _fail(report.message)
             typer.echo(f"ok: {report.message}")
-            controller = read_run_record(p)["controller"]
-            typer.echo(controller_note(controller["file"], controller["sha256"]))
+            record = read_run_record(p)
+            named = record["controller"]
+            if not rerun:
+                typer.echo(controller_note(named["file"], named["sha256"]))
+                return
+            from hexbench.replay.rerun import rerun_episodes
+
+            found = Path(controller) if controller else find_controller(named["file"])
+            if found is None or not found.is_file():
+                _fail(f"{controller or named['file']}: no such controller file here; --rerun needs the file the record "
+                      f"names (sha256 {named['sha256'][:12]}): pass it with --controller FILE", 2)
+            try:
+                with engines.opened(engine, address) as rerun_engine:
+                    result = rerun_episodes(p, record, list(report.episodes), found,
+                                            workers=workers or rerun_engine.default_workers(), progress=True)
+            except HexbenchError as e:
+                _fail(str(e), 2)
+            if not result.ok:
+                _fail(result.message)
+            typer.echo(f"ok: {result.message}")
             return
+        if rerun:
+            _fail(f"{path}: --rerun takes a run folder", 2)
         if not p.suffix and not p.with_name(p.name + ".mcap").is_file():
             _fail(f"{path}: no such run folder or episode file", 2)
         from hexbench.recording.reader import read_episode

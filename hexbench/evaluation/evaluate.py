@@ -102,7 +102,7 @@ class RunResult:
     error: str | None = None
 
 
-def _weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: str, limits,
+def weights_by_terrain(controller_file: str, tasks: list[TaskSpec], isolation: str, limits,
                         hidden: tuple[str, ...], controller_sha256: str) -> dict[str, list[dict]]:
     """Per terrain, path and sha256 of every weights file the controller loads for it.
 
@@ -265,7 +265,7 @@ def _evaluate(controller_file, tasks, out, episodes, workers, record, label, pro
                    if p is not None)
     # the code the record names: every episode checks it is still this file (`controller_changed`)
     started_sha256 = sha256_file(controller_file, MAX_CONTROLLER_FILE_BYTES, "controller file")
-    weights = _weights_by_terrain(controller_file, tasks, mode, limits, hidden, started_sha256)
+    weights = weights_by_terrain(controller_file, tasks, mode, limits, hidden, started_sha256)
     action_mode = sandbox.controller_for(controller_file, tasks[0], mode, limits, hidden, started_sha256).action_mode
     if workers > 1:
         sandbox.close_all()  # the workers start their own controller processes

@@ -45,6 +45,7 @@ class VerifyReport:
     message: str
     episodes_replayed: int
     episodes_total: int
+    episodes: tuple[dict, ...] = ()  # the rows replayed (all, or the sample), when every one replayed exactly
 
 
 def read_run_record(run_dir: Path) -> dict:
@@ -259,4 +260,4 @@ def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random
     note = " (keyed seed set: seeds not checked without --seed-key)" if keyed else ""
     what = f"{len(chosen)} of {total}" if len(chosen) < total else f"all {total}"
     return VerifyReport(True, f"{run_dir}: {what} episodes replay exactly from their action logs; summaries and "
-                              f"digest match{note}", len(chosen), total)
+                              f"digest match{note}", len(chosen), total, tuple(chosen))
