@@ -159,3 +159,32 @@ def test_the_shipped_record_reproduces(tmp_path):
     report = rerun.rerun_episodes(out, record, record["episodes"], ppo)
     assert report.ok, report.message
     shutil.rmtree(out)
+
+
+@needs_bwrap
+def test_leaderboard_admission_can_rerun_the_controller(tiny_protocol, tmp_path):
+    """`hexbench leaderboard add RUN --rerun`: the admission says the controller was re-run; a record
+    naming a controller that did not choose its actions is refused in one line, and nothing joins."""
+    tasks = list(load_suite("v1").tasks)
+    run = tmp_path / "run"
+    assert evaluate(CPG, tasks, run, workers=1, record=False, progress=False).error is None
+    board = tmp_path / "lb"
+    board.mkdir()
+    added = CliRunner().invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--workers", "1", "--rerun"])
+    assert added.exit_code == 0, added.output
+    admission = json.loads((board / "cpg.json").read_text())["admission"]
+    assert admission["controller_rerun"] == {"episodes": 6, "isolation": "bubblewrap", "with_run_secret": True}
+
+    steps_aside = controller(tmp_path, "aside.py", "np.full(18, 0.05)")
+    forged = tmp_path / "forged"
+    assert evaluate(steps_aside, tasks, forged, workers=1, record=False, progress=False).error is None
+    record = json.loads((forged / "result.json").read_text())
+    record["label"] = "Forged"
+    record["controller"].update(file=CPG, sha256=hashlib.sha256(Path(CPG).read_bytes()).hexdigest())
+    (forged / "result.json").write_text(json.dumps(record))
+    refused = CliRunner().invoke(app, ["leaderboard", "add", str(forged), "--dir", str(board), "--workers", "1",
+                                       "--rerun"])
+    errors = [line for line in refused.output.splitlines() if line.startswith("error:")]
+    assert refused.exit_code == 1 and len(errors) == 1, refused.output
+    assert "refused:" in errors[0] and "the actions differ from step 0 on" in errors[0]
+    assert not (board / "forged.json").exists()

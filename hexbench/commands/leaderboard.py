@@ -56,6 +56,11 @@ def register(app: typer.Typer) -> None:
         address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
         seed_run: Path = typer.Option(None, "--seed-run", help="admit the run as this seed-run folder's record "
                                       "(baselines/seeds/<method>-<terrain>-seed<S>/result-<terrain>.json) instead"),
+        rerun: bool = typer.Option(False, "--rerun", help="also play the replayed episodes again with the controller "
+                                   "the record names, sandboxed: every action must be the recorded one (the "
+                                   "admission says so)"),
+        controller: str = typer.Option(None, "--controller", help="with --rerun: the controller file, where it is not "
+                                       "at the path the record names (it must be the same file: sha256)"),
     ) -> None:
         """Validate a run's record, replay its episodes from their action logs, copy it in with its admission, rebuild.
 
@@ -69,13 +74,17 @@ def register(app: typer.Typer) -> None:
 
         try:
             seed_set = read_seed_key(seed_key) if seed_key else None
+            rerun_controller = _rerun_controller(run_dir, controller) if rerun else None
+            if rerun_controller is not None and seed_run is not None:
+                raise RecordError("--rerun admits a run to the board; a seed run is admitted by replay alone")
             with engines.opened(engine, address) as replay_engine:
                 replay_workers = workers or replay_engine.default_workers()
                 if seed_run is not None:
                     dest = add_seed_run(run_dir, seed_run, protocol, sample=sample, workers=replay_workers, progress=True)
                 else:
                     dest = add(run_dir, directory, replace=replace, protocol=protocol, sample=sample,
-                               workers=replay_workers, seed_set=seed_set, progress=True)
+                               workers=replay_workers, seed_set=seed_set, progress=True,
+                               rerun_controller=rerun_controller)
             result = build(directory, protocol)
         except (RecordError, ValueError, HexbenchError) as e:
             typer.echo(f"error: {e}", err=True)
@@ -85,3 +94,22 @@ def register(app: typer.Typer) -> None:
         typer.echo(f"added {dest}; rebuilt {', '.join(str(p) for p in result.written)}")
         if result.errors:
             raise typer.Exit(1)
+
+
+def _rerun_controller(run_dir: Path, controller: str | None) -> Path:
+    """The controller file `--rerun` plays: --controller FILE, else the file the run's record names
+    (as recorded, or relative to the repository). RecordError (one line) where there is none."""
+    from hexbench.commands.recording import find_controller
+    from hexbench.leaderboard import RecordError
+    from hexbench.leaderboard.records import read_record
+
+    if controller:
+        found = Path(controller)
+    else:
+        record_path = run_dir / "result.json" if run_dir.is_dir() else run_dir
+        named = read_record(record_path).get("controller") or {}
+        found = find_controller(str(named.get("file", ""))) if named.get("file") else None
+    if found is None or not found.is_file():
+        raise RecordError(f"{controller or run_dir}: no controller file to re-run here; pass the file the record "
+                          f"names with --controller FILE")
+    return found

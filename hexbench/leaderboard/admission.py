@@ -39,6 +39,7 @@ from hexbench.leaderboard.records import (
     record_tier,
     rows_of,
 )
+from hexbench.replay.rerun import rerun_episodes
 from hexbench.replay.verify import verify_run
 from hexbench.suite.tasks import DEFAULT_PROTOCOL
 
@@ -58,8 +59,10 @@ def _admission_source(source: Path) -> tuple[Path, Path | None]:
 
 
 def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None = None, workers: int = 1,
-          seed_set=None, rng=None, progress: bool = False) -> dict:
-    """Replay a measured run before it joins; return the record with its admission block. RecordError if refused."""
+          seed_set=None, rng=None, progress: bool = False, rerun_controller: str | Path | None = None) -> dict:
+    """Replay a measured run before it joins; return the record with its admission block. RecordError if refused.
+    With `rerun_controller` (the file the record names), the replayed episodes are also played again
+    with it in the sandbox, and every action must be the recorded one (`hexbench.replay.rerun`)."""
     if run_dir is None:
         raise RecordError(f"{where}: a measured record joins only with its run folder (its action logs), e.g. "
                           f"`hexbench leaderboard add runs/NAME`; a record alone cannot be replayed")
@@ -77,6 +80,13 @@ def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None 
     admitted["admission"] = {"verified_by": "replay of action logs", "episodes_replayed": report.episodes_replayed,
                              "episodes_total": report.episodes_total, "episodes_digest": record["episodes_digest"],
                              "hexbench_version": HEXBENCH_VERSION, "git_commit": git_commit()}
+    if rerun_controller is not None:
+        rerun = rerun_episodes(run_dir, record, list(report.episodes), rerun_controller, workers=workers,
+                               progress=progress)
+        if not rerun.ok:
+            raise RecordError(f"refused: {rerun.message}")
+        admitted["admission"]["controller_rerun"] = {"episodes": rerun.episodes_rerun, "isolation": rerun.isolation,
+                                                     "with_run_secret": rerun.with_run_secret}
     return admitted
 
 
@@ -155,9 +165,10 @@ def _refuse_downgrade(dest: Path, record: dict, where: str) -> None:
 
 def add(result_path: str | Path, directory: str | Path = "leaderboard", replace: bool = False,
         protocol: str = DEFAULT_PROTOCOL, *, sample: int | None = None, workers: int = 1, seed_set=None,
-        progress: bool = False) -> Path:
-    """Validate a record, replay its run (measured records), and copy it into `directory` as
-    <slug(label)>.json; RecordError if refused."""
+        progress: bool = False, rerun_controller: str | Path | None = None) -> Path:
+    """Validate a record, replay its run (measured records; with `rerun_controller`, re-run its
+    controller on the replayed episodes too), and copy it into `directory` as <slug(label)>.json;
+    RecordError if refused."""
     result_path, run_dir = _admission_source(Path(result_path))
     directory = board = Path(directory)
     record = read_record(result_path)
@@ -198,9 +209,11 @@ def add(result_path: str | Path, directory: str | Path = "leaderboard", replace:
     if dest.exists() and dest.resolve() != result_path.resolve() and not replace:
         raise RecordError(f"{dest} already exists; pass --replace to overwrite it")
     _check_episodes_are_new(record, board_records, str(result_path))
+    if rerun_controller is not None and record["kind"] != "measured":
+        raise RecordError(f"{result_path}: --rerun re-runs a measured record's controller; this record is {record['kind']}")
     if record["kind"] == "measured":
         record = admit(record, run_dir, str(result_path), sample=sample, workers=workers, seed_set=seed_set,
-                       progress=progress)
+                       progress=progress, rerun_controller=rerun_controller)
         if dest.exists():
             _refuse_downgrade(dest, record, str(result_path))
     if dest.resolve() != result_path.resolve():

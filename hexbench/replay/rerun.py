@@ -48,6 +48,8 @@ class RerunReport:
     ok: bool
     message: str
     episodes_rerun: int
+    isolation: str = ""  # the sandbox the controller ran in
+    with_run_secret: bool = False  # whether its reset() seeds came from the run's secret
 
 
 def _episode_name(row: dict, unit: str) -> str:
@@ -140,13 +142,13 @@ def rerun_episodes(run_dir: str | Path, record: dict, rows: list[dict], controll
             if problem:
                 hint = "" if secret_hex else (" (the run folder holds no run secret, .journal/run_secret: a controller "
                                               "whose actions depend on its reset() seed cannot be reproduced without it)")
-                return RerunReport(False, f"{run_dir}: {problem}{hint}", len(results))
+                return RerunReport(False, f"{run_dir}: {problem}{hint}", len(results), mode, secret_hex is not None)
     seeds = "with the run's secret" if secret_hex else "without the run's secret"
     total = len(record["episodes"])
     what = f"{len(rows)} of {total}" if len(rows) < total else "the episode" if total == 1 else f"all {total} episodes"
     return RerunReport(True, f"{run_dir}: {controller_file} (sha256 {sha[:12]}, its weights as recorded), re-run "
                              f"under {mode} isolation {seeds}, chose every action of {what} exactly as recorded",
-                       len(results))
+                       len(results), mode, secret_hex is not None)
 
 
 def _difference(run_dir: Path, recorded: dict, rerun: dict, scratch: Path, unit: str) -> str | None:
