@@ -125,6 +125,8 @@ CASES: dict[str, Case] = {
     "attack_namespace_tmpfs@process": Case(HONEST, extra_args=PROCESS),
     "attack_keyring": Case(HONEST),
     "attack_keyring@process": Case(HONEST, extra_args=PROCESS),
+    "attack_leave_core": Case(HONEST),
+    "attack_leave_core@process": Case(HONEST, extra_args=PROCESS),
     "attack_thread_bomb": Case(ERROR, max_s=30.0, error_words=("threads",)),
     "attack_thread_bomb@process": Case(ERROR, max_s=30.0, extra_args=PROCESS, error_words=("threads",)),
     "attack_ndarray_subclass": Case(EITHER),

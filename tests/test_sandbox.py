@@ -467,3 +467,15 @@ def test_threads_are_bounded_from_outside(tmp_path, isolation, processes_started
         run_episode(short_job(slow, isolation))
     assert time.monotonic() - start < 5.0
     assert processes_started_here() == []
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="one core: nothing to pin")
+@pytest.mark.parametrize("isolation", ["auto", "process"])
+def test_one_worker_runs_its_controller_on_its_own_core(tmp_path, isolation):
+    """The controller process the run starts first (before the worker pins itself) is pinned along:
+    evaluator and controller take turns on one core, with one worker as with several."""
+    path = controller(tmp_path, "import os\ndef check(self):\n    assert len(os.sched_getaffinity(0)) == 1, "
+                                "sorted(os.sched_getaffinity(0))\n")
+    result = evaluate(path, [load_suite("v1").task("stairs", 2)], tmp_path / "run", episodes=1, workers=1,
+                      record=False, progress=False, isolation=isolation, max_steps=5)
+    assert result.error is None, result.error

@@ -46,13 +46,16 @@ NAMESPACE_AND_MOUNT_CALLS = ("unshare", "setns", "mount", "umount2", "pivot_root
                              "fsmount", "fspick", "move_mount", "open_tree", "mount_setattr")
 KERNEL_OBJECT_CALLS = ("add_key", "request_key", "keyctl", "io_uring_setup", "io_uring_enter", "io_uring_register",
                        "bpf", "userfaultfd", "perf_event_open")
+# the evaluator pins each worker, and the controller process it starts, to a core of its own: a
+# controller that moved its threads elsewhere would take another worker's core
+PLACEMENT_CALLS = ("sched_setaffinity",)
 
 
 def forbid_processes_and_network() -> str:
     """Install a seccomp filter: no fork/vfork/clone without CLONE_THREAD, clone3 unavailable (glibc
     falls back to clone), sockets only of the AF_UNIX family, no memfds, SysV IPC, new namespaces or
     mounts (memory outside the address-space limit), no keyrings, io_uring, eBPF, userfaultfd or perf
-    events, and no reach into other processes:
+    events, no moving off the evaluator's core, and no reach into other processes:
     signals only to this process, no resource limits or priority but its own, no tracing, pidfds
     or cross-process memory calls. Under bubblewrap the evaluator is outside the controller's PID
     namespace anyway; under `--isolation process` it may run as the same user, who could otherwise
@@ -76,7 +79,7 @@ def forbid_processes_and_network() -> str:
         flt.add_rule(deny, "prlimit64", seccomp.Arg(0, seccomp.NE, 0))  # getrlimit/setrlimit pass 0: itself
         flt.add_rule(deny, "setpriority", seccomp.Arg(0, seccomp.NE, 0))  # PRIO_PROCESS only ...
         flt.add_rule(deny, "setpriority", seccomp.Arg(1, seccomp.NE, 0))  # ... of itself
-        for call in OTHER_PROCESS_CALLS:
+        for call in OTHER_PROCESS_CALLS + PLACEMENT_CALLS:
             flt.add_rule(deny, call)
         for call in MEMORY_OUTSIDE_LIMITS_CALLS + NAMESPACE_AND_MOUNT_CALLS + KERNEL_OBJECT_CALLS:
             try:

@@ -74,6 +74,8 @@ class LocalEngine:
         the rest and propagates; any other failure in a worker becomes a one-line ControllerError."""
         if workers <= 1:
             previous = pin_to_core()
+            if previous is not None:  # the controller processes started before (the run's first) go along
+                sandbox.pin_all(os.sched_getaffinity(0))
             try:
                 for job in todo:
                     finished(job, run_episode(job))

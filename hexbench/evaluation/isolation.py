@@ -138,7 +138,7 @@ def isolation_record(mode: str, limits: Limits = DEFAULT_LIMITS, controller_file
             else "root without capabilities (the Python environment is not readable by nobody)"
     record = {"mode": mode, "sandboxed": True,
               "seccomp": ("no new processes, AF_UNIX sockets only, signals and limits to itself only, "
-                          "no memfds, SysV IPC, namespaces, mounts or keyrings")
+                          "no memfds, SysV IPC, namespaces, mounts or keyrings, stays on its core")
               if seccomp_available() else "off",
               "user": user,
               "address_space_bytes": limits.address_space_bytes, "cpu_time_s": limits.cpu_time_s,

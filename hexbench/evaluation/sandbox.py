@@ -392,6 +392,22 @@ class ControllerProcess:
             raise self._fail(f"made more than {SCRATCH_ENTRIES_MAX:,} files and folders in its scratch folder",
                              context + " (controller process killed)")
 
+    def pin(self, cores: set[int]) -> None:
+        """Pin every thread of the controller's process tree to `cores` (one started before its
+        worker pinned itself would float over every core; it cannot change its own placement)."""
+        pending, seen = [self.proc.pid] if self.proc is not None else [], set()
+        while pending:
+            pid = pending.pop()
+            if pid in seen:
+                continue
+            seen.add(pid)
+            try:
+                for tid in os.listdir(f"/proc/{pid}/task"):
+                    os.sched_setaffinity(int(tid), cores)
+                    pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
+            except (OSError, ValueError):
+                continue
+
     def cpu_seconds(self) -> float:
         """CPU time [s] used so far by the controller's process tree."""
         return self.tree_times(queued=False)[0]
@@ -603,6 +619,12 @@ def controller_for(controller_file: str, task, isolation: str, limits: Limits = 
         raise
 
 
+def pin_all(cores: set[int]) -> None:
+    """Pin this worker's controller processes to `cores` (what the worker has just pinned itself to)."""
+    for proc in _PROCESSES.values():
+        proc.pin(cores)
+
+
 def close_all() -> None:
     """Stop every controller process of this worker (end of a run, or the worker's exit)."""
     for proc in list(_PROCESSES.values()):
@@ -620,5 +642,5 @@ def drop(controller_file: str) -> None:
 
 
 __all__ = ["ControllerError", "seccomp_available", "ISOLATIONS", "Limits", "DEFAULT_LIMITS", "ControllerProcess", "RemoteController", "InProcessController",
-           "NotAnArray", "WrongDtype", "controller_for", "close_all", "drop", "resolve_isolation", "isolation_record",
+           "NotAnArray", "WrongDtype", "controller_for", "pin_all", "close_all", "drop", "resolve_isolation", "isolation_record",
            "bubblewrap_version"]
