@@ -332,27 +332,38 @@ class ControllerProcess:
         lines = [line for line in lines if line]
         return lines[-1][:300] if lines else ""
 
-    def tree_times(self, queued: bool = True) -> tuple[float, float]:
-        """CPU time [s] used so far by the controller's process tree (bubblewrap and everything below
-        it, exited threads included), and the time its live threads have spent queued for a CPU [s]
-        (the scheduler's per-thread counters; 0 where the kernel keeps none, or if not `queued`).
-        Read with plain system calls: about 10 us a file, against 100 us and more through pathlib.
-        Also keeps the number of the tree's threads in `threads_seen`."""
-        ticks, queued_ns, pending, seen, threads = 0, 0, [self.proc.pid], set(), 0
-        queued = queued and SCHEDULER_COUNTERS
+    def _tree(self):
+        """Each process of the controller's tree (bubblewrap and everything below it) with its thread
+        ids, parents first; processes that end meanwhile are left out. Read with plain system calls:
+        about 10 us a file, against 100 us and more through pathlib."""
+        pending, seen = [self.proc.pid] if self.proc is not None else [], set()
         while pending:
             pid = pending.pop()
             if pid in seen:
                 continue
             seen.add(pid)
             try:
+                tids = os.listdir(f"/proc/{pid}/task")
+                for tid in tids:
+                    pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
+            except (OSError, ValueError):
+                continue
+            yield pid, tids
+
+    def tree_times(self, queued: bool = True) -> tuple[float, float]:
+        """CPU time [s] used so far by the controller's process tree (exited threads included), and
+        the time its live threads have spent queued for a CPU [s] (the scheduler's per-thread
+        counters; 0 where the kernel keeps none, or if not `queued`). Also keeps the number of the
+        tree's threads in `threads_seen`."""
+        ticks, queued_ns, threads = 0, 0, 0
+        queued = queued and SCHEDULER_COUNTERS
+        for pid, tids in self._tree():
+            try:
                 fields = _read_proc(f"/proc/{pid}/stat").rsplit(b")", 1)[1].split()
                 ticks += int(fields[11]) + int(fields[12])  # utime, stime [clock ticks]
                 threads += int(fields[17])  # num_threads
-                for tid in os.listdir(f"/proc/{pid}/task"):
-                    if queued:
-                        queued_ns += int(_read_proc(f"/proc/{pid}/task/{tid}/schedstat").split()[1])
-                    pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
+                for tid in tids if queued else ():
+                    queued_ns += int(_read_proc(f"/proc/{pid}/task/{tid}/schedstat").split()[1])
             except (OSError, ValueError, IndexError):
                 continue
         self.threads_seen = threads
@@ -395,18 +406,12 @@ class ControllerProcess:
     def pin(self, cores: set[int]) -> None:
         """Pin every thread of the controller's process tree to `cores` (one started before its
         worker pinned itself would float over every core; it cannot change its own placement)."""
-        pending, seen = [self.proc.pid] if self.proc is not None else [], set()
-        while pending:
-            pid = pending.pop()
-            if pid in seen:
-                continue
-            seen.add(pid)
-            try:
-                for tid in os.listdir(f"/proc/{pid}/task"):
+        for _, tids in self._tree():
+            for tid in tids:
+                try:
                     os.sched_setaffinity(int(tid), cores)
-                    pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
-            except (OSError, ValueError):
-                continue
+                except OSError:  # ended meanwhile
+                    pass
 
     def cpu_seconds(self) -> float:
         """CPU time [s] used so far by the controller's process tree."""
