@@ -57,6 +57,8 @@ def test_the_recorded_controller_reproduces_every_action(tiny_protocol, tmp_path
     res = verify(str(run), "--rerun")
     assert res.exit_code == 0, res.output
     assert "with the run's secret, chose every action of all 2 episodes exactly as recorded" in res.output
+    sampled = verify(str(run), "--rerun", "--sample", "1")
+    assert sampled.exit_code == 0 and "chose every action of 1 of 2 episodes exactly as recorded" in sampled.output
 
     (run / ".journal" / "run_secret").unlink()  # without it, the reset() seeds differ
     res = verify(str(run), "--rerun")

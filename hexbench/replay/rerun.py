@@ -145,7 +145,7 @@ def rerun_episodes(run_dir: str | Path, record: dict, rows: list[dict], controll
                 return RerunReport(False, f"{run_dir}: {problem}{hint}", len(results), mode, secret_hex is not None)
     seeds = "with the run's secret" if secret_hex else "without the run's secret"
     total = len(record["episodes"])
-    what = f"{len(rows)} of {total}" if len(rows) < total else "the episode" if total == 1 else f"all {total} episodes"
+    what = f"{len(rows)} of {total} episodes" if len(rows) < total else "the episode" if total == 1 else f"all {total} episodes"
     return RerunReport(True, f"{run_dir}: {controller_file} (sha256 {sha[:12]}, its weights as recorded), re-run "
                              f"under {mode} isolation {seeds}, chose every action of {what} exactly as recorded",
                        len(results), mode, secret_hex is not None)
