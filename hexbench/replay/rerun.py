@@ -103,39 +103,31 @@ def rerun_episodes(run_dir: str | Path, record: dict, rows: list[dict], controll
                          f"(bubblewrap, or --isolation process where the kernel has Landlock); here: {mode}")
     suite = load_suite(record["protocol"])
     tasks = {(t.terrain, float(t.level)): t for t in suite.all_tasks}
-    hidden = _hidden_paths(run_dir)
-    limits = sandbox.Limits()
-    chosen_tasks = list({(r["terrain"], float(r["level"])): tasks[(r["terrain"], float(r["level"]))] for r in rows}.values())
-    try:
-        weights = weights_by_terrain(controller_file, chosen_tasks, mode, limits, hidden, sha)
-    finally:
-        sandbox.close_all()
-    recorded_weights = {w["sha256"] for w in named.get("checkpoints", [])}
-    used_weights = {w["sha256"] for ws in weights.values() for w in ws}
-    if not used_weights <= recorded_weights:
-        missing = sorted({w["path"] for ws in weights.values() for w in ws if w["sha256"] not in recorded_weights})
-        raise RerunError(f"{controller_file}: its weights file {missing[0]} is not one the record names (sha256 differs): "
-                         f"the re-run would not be the recorded controller")
     secret_hex = read_run_secret_hex(run_dir)
     results: dict[tuple, dict] = {}
     with tempfile.TemporaryDirectory(prefix="hexbench-rerun-") as scratch:
-        jobs = [EpisodeJob(controller_file, tasks[(r["terrain"], float(r["level"]))], int(r["index"]), int(r["seed"]),
-                           log_dir=scratch, isolation=mode, secret_hex=secret_hex or "", hidden=(*hidden, scratch),
-                           controller_sha256=sha)
-                for r in rows]
+        hidden = (*_hidden_paths(run_dir), scratch)
+        try:
+            _check_weights(controller_file, named, [tasks[(r["terrain"], float(r["level"]))] for r in rows], mode,
+                           hidden, sha)
+            if workers > 1:
+                sandbox.close_all()  # the workers start their own controller processes; one worker reuses it
+            jobs = [EpisodeJob(controller_file, tasks[(r["terrain"], float(r["level"]))], int(r["index"]),
+                               int(r["seed"]), log_dir=scratch, isolation=mode, secret_hex=secret_hex or "",
+                               hidden=hidden, controller_sha256=sha)
+                    for r in rows]
 
-        def finished(job: EpisodeJob, row: dict) -> None:
-            results[(job.task.terrain, float(job.task.level), job.index)] = row
+            def finished(job: EpisodeJob, row: dict) -> None:
+                results[(job.task.terrain, float(job.task.level), job.index)] = row
 
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-        with Progress(TextColumn("[bold]re-running[/]"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                      disable=not progress) as bar:
-            task_bar = bar.add_task("episodes", total=len(jobs))
-            try:
+            with Progress(TextColumn("[bold]re-running[/]"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                          disable=not progress) as bar:
+                task_bar = bar.add_task("episodes", total=len(jobs))
                 engines.current().play_all(jobs, finished, lambda: bar.advance(task_bar), workers)
-            finally:
-                sandbox.close_all()
+        finally:
+            sandbox.close_all()
         for row in rows:
             key = (row["terrain"], float(row["level"]), int(row["index"]))
             problem = _difference(run_dir, row, results[key], Path(scratch), tasks[key[:2]].unit)
@@ -149,6 +141,18 @@ def rerun_episodes(run_dir: str | Path, record: dict, rows: list[dict], controll
     return RerunReport(True, f"{run_dir}: {controller_file} (sha256 {sha[:12]}, its weights as recorded), re-run "
                              f"under {mode} isolation {seeds}, chose every action of {what} exactly as recorded",
                        len(results), mode, secret_hex is not None)
+
+
+def _check_weights(controller_file: str, named: dict, tasks: list, mode: str, hidden: tuple[str, ...],
+                   sha: str) -> None:
+    """RerunError unless every weights file the controller declares for `tasks` is one the record names."""
+    chosen = list({(t.terrain, float(t.level)): t for t in tasks}.values())
+    weights = weights_by_terrain(controller_file, chosen, mode, sandbox.Limits(), hidden, sha)
+    recorded = {w["sha256"] for w in named.get("checkpoints", [])}
+    other = sorted({w["path"] for ws in weights.values() for w in ws if w["sha256"] not in recorded})
+    if other:
+        raise RerunError(f"{controller_file}: its weights file {other[0]} is not one the record names (sha256 differs): "
+                         f"the re-run would not be the recorded controller")
 
 
 def _difference(run_dir: Path, recorded: dict, rerun: dict, scratch: Path, unit: str) -> str | None:
