@@ -344,10 +344,13 @@ class ControllerProcess:
             seen.add(pid)
             try:
                 tids = os.listdir(f"/proc/{pid}/task")
-                for tid in tids:
-                    pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
-            except (OSError, ValueError):
+            except OSError:  # the process has ended
                 continue
+            for tid in tids:
+                try:
+                    pending += [int(c) for c in _read_proc(f"/proc/{pid}/task/{tid}/children").split()]
+                except (OSError, ValueError):  # a thread that ended meanwhile: its process still counts
+                    continue
             yield pid, tids
 
     def tree_times(self, queued: bool = True) -> tuple[float, float]:
