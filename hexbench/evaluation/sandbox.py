@@ -372,10 +372,11 @@ class ControllerProcess:
         self.threads_seen = threads
         return ticks / _CLOCK_TICKS, queued_ns / 1e9
 
-    def check_limits(self, context: str) -> None:
+    def check_limits(self, context: str, sampled: bool = False) -> None:
         """Kill the controller (one ControllerError) past a limit the evaluator checks: its threads and,
-        under process isolation, its scratch folder."""
-        self.tree_times(queued=False)
+        under process isolation, its scratch folder. `sampled`: the tree's threads were just counted."""
+        if not sampled:
+            self.tree_times(queued=False)
         self.check_threads(context)
         if self.scratch is not None:
             self.check_scratch(context)
@@ -524,9 +525,7 @@ class ControllerProcess:
             self._count_calls += 1
             if self._count_wall_s > COUNT_AFTER_S or self._count_calls >= COUNT_AFTER_CALLS:
                 self._count_waiting(what, context)  # samples the tree's threads too
-                self.check_threads(context)
-                if self.scratch is not None:
-                    self.check_scratch(context)
+                self.check_limits(context, sampled=True)
         else:
             self.check_limits(context)
         if answer == wire.ERROR:

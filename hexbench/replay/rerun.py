@@ -32,9 +32,10 @@ from hexbench.evaluation import engines, sandbox
 from hexbench.evaluation.episode import EpisodeJob, first_row_difference
 from hexbench.evaluation.evaluate import weights_by_terrain
 from hexbench.evaluation.isolation import landlock_abi
+from hexbench.replay.verify import episode_name
 from hexbench.suite.controller import MAX_CONTROLLER_FILE_BYTES
 from hexbench.suite.seeds import RUN_SECRET_FILE
-from hexbench.suite.tasks import format_level, load_suite
+from hexbench.suite.tasks import load_suite
 
 RUN_SECRET_BYTES = 32
 
@@ -50,10 +51,6 @@ class RerunReport:
     episodes_rerun: int
     isolation: str = ""  # the sandbox the controller ran in
     with_run_secret: bool = False  # whether its reset() seeds came from the run's secret
-
-
-def _episode_name(row: dict, unit: str) -> str:
-    return f"{row['terrain']} {format_level(float(row['level']))}{unit} episode {row['index']}"
 
 
 def read_run_secret_hex(run_dir: Path) -> str | None:
@@ -156,7 +153,7 @@ def _check_weights(controller_file: str, named: dict, tasks: list, mode: str, hi
 
 
 def _difference(run_dir: Path, recorded: dict, rerun: dict, scratch: Path, unit: str) -> str | None:
-    name = _episode_name(recorded, unit)
+    name = episode_name(recorded, unit)
     if rerun.get("action_log_sha256") == recorded.get("action_log_sha256"):
         diff = first_row_difference(recorded, rerun)  # the same actions replay the same: only a forged row differs
         return None if diff is None else f"{name}: {diff}"

@@ -63,7 +63,8 @@ def read_run_record(run_dir: Path) -> dict:
     return record
 
 
-def _episode_name(row: dict, unit: str) -> str:
+def episode_name(row: dict, unit: str) -> str:
+    """How a message names an episode row: `stairs 2cm episode 0`."""
     return f"{row['terrain']} {format_level(row['level'])}{unit} episode {row['index']}"
 
 
@@ -146,7 +147,7 @@ def check_episode_set(record: dict) -> str | None:
             task = suite.task(row["terrain"], float(row["level"]))
         except ValueError as e:
             return f"episodes[{n}]: {e}"
-        name = _episode_name(row, task.unit)
+        name = episode_name(row, task.unit)
         not_finite = next((k for k, v in row.items() if isinstance(v, float) and not math.isfinite(v)), None)
         if not_finite:
             return f"{name}: {not_finite} is {row[not_finite]}, not a finite number"
@@ -157,7 +158,7 @@ def check_episode_set(record: dict) -> str | None:
     per_task = Counter((terrain, level) for terrain, level, _ in first)
     for (terrain, level, index), n in first.items():
         if index >= per_task[(terrain, level)]:
-            return (f"{_episode_name(rows[n], suite.task(terrain, level).unit)}: a run's episodes of a task are "
+            return (f"{episode_name(rows[n], suite.task(terrain, level).unit)}: a run's episodes of a task are "
                     f"numbered 0..{per_task[(terrain, level)] - 1}")
     return None
 
@@ -191,7 +192,7 @@ def check_seeds(record: dict, seed_set: SeedSet | None) -> str | None:
         task = suite.task(row["terrain"], float(row["level"]))
         expected = seed_set.seeds(task, row["index"] + 1)[row["index"]]
         if row["seed"] != expected:
-            return f"{_episode_name(row, task.unit)}: seed {row['seed']} is not the seed set's ({expected})"
+            return f"{episode_name(row, task.unit)}: seed {row['seed']} is not the seed set's ({expected})"
     return None
 
 
@@ -202,7 +203,7 @@ def _replay_one(args: tuple) -> str | None:
     protocol, row, log_dir, log_bytes = args
     task = load_suite(protocol).task(row["terrain"], float(row["level"]))
     if isinstance(log_bytes, str):
-        return f"{_episode_name(row, task.unit)}: {log_bytes}"
+        return f"{episode_name(row, task.unit)}: {log_bytes}"
     try:
         if log_bytes is None:
             replayed = replay_row(task, row, Path(log_dir))
@@ -211,9 +212,9 @@ def _replay_one(args: tuple) -> str | None:
                 (Path(scratch) / Path(row["action_log_path"]).name).write_bytes(log_bytes)
                 replayed = replay_row(task, {**row, "action_log_path": Path(row["action_log_path"]).name}, Path(scratch))
     except HexbenchError as e:
-        return f"{_episode_name(row, task.unit)}: {e}"
+        return f"{episode_name(row, task.unit)}: {e}"
     diff = first_row_difference(row, replayed)
-    return None if diff is None else f"{_episode_name(row, task.unit)}: {diff}"
+    return None if diff is None else f"{episode_name(row, task.unit)}: {diff}"
 
 
 def _log_bytes(log_dir: Path, row: dict) -> bytes | str | None:
