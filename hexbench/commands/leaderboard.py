@@ -69,12 +69,13 @@ def register(app: typer.Typer) -> None:
         from hexbench.errors import HexbenchError
         from hexbench.evaluation import engines
         from hexbench.leaderboard import RecordError, add, build
+        from hexbench.commands.recording import controller_to_rerun
         from hexbench.leaderboard.admission import add_seed_run
         from hexbench.suite.seeds import read_seed_key
 
         try:
             seed_set = read_seed_key(seed_key) if seed_key else None
-            rerun_controller = _rerun_controller(run_dir, controller) if rerun else None
+            rerun_controller = controller_to_rerun(_record_of(run_dir).get("controller") or {}, controller) if rerun else None
             if rerun_controller is not None and seed_run is not None:
                 raise RecordError("--rerun admits a run to the board; a seed run is admitted by replay alone")
             with engines.opened(engine, address) as replay_engine:
@@ -96,20 +97,8 @@ def register(app: typer.Typer) -> None:
             raise typer.Exit(1)
 
 
-def _rerun_controller(run_dir: Path, controller: str | None) -> Path:
-    """The controller file `--rerun` plays: --controller FILE, else the file the run's record names
-    (as recorded, or relative to the repository). RecordError (one line) where there is none."""
-    from hexbench.commands.recording import find_controller
-    from hexbench.leaderboard import RecordError
+def _record_of(run_dir: Path) -> dict:
+    """The record `leaderboard add` was given: RUN_DIR/result.json, or the record file itself."""
     from hexbench.leaderboard.records import read_record
 
-    if controller:
-        found = Path(controller)
-    else:
-        record_path = run_dir / "result.json" if run_dir.is_dir() else run_dir
-        named = read_record(record_path).get("controller") or {}
-        found = find_controller(str(named.get("file", ""))) if named.get("file") else None
-    if found is None or not found.is_file():
-        raise RecordError(f"{controller or run_dir}: no controller file to re-run here; pass the file the record "
-                          f"names with --controller FILE")
-    return found
+    return read_record(run_dir / "result.json" if run_dir.is_dir() else run_dir)

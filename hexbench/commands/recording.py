@@ -40,6 +40,20 @@ def find_controller(recorded: str) -> Path | None:
     return None
 
 
+def controller_to_rerun(named: dict, controller: str | None) -> Path:
+    """The controller file `--rerun` plays: --controller FILE, else the file a record names (`named`,
+    its `controller` block) as `find_controller` finds it. RerunError (one line) where there is none."""
+    from hexbench.replay.rerun import RerunError
+
+    if not controller and not named.get("file"):
+        raise RerunError("the record names no controller file to re-run (a measured record does)")
+    found = Path(controller) if controller else find_controller(str(named["file"]))
+    if found is None or not found.is_file():
+        raise RerunError(f"{controller or named.get('file')}: no such controller file here; --rerun needs the file the "
+                         f"record names (sha256 {str(named.get('sha256', ''))[:12]}): pass it with --controller FILE")
+    return found
+
+
 def controller_note(recorded: str, sha256: str) -> str:
     """One line on the controller file a run names: found here and the same file, changed, or absent
     (replaying from action logs never needs it)."""
@@ -226,11 +240,8 @@ def register(app: typer.Typer) -> None:
                 return
             from hexbench.replay.rerun import rerun_episodes
 
-            found = Path(controller) if controller else find_controller(named["file"])
-            if found is None or not found.is_file():
-                _fail(f"{controller or named['file']}: no such controller file here; --rerun needs the file the record "
-                      f"names (sha256 {named['sha256'][:12]}): pass it with --controller FILE", 2)
             try:
+                found = controller_to_rerun(named, controller)
                 with engines.opened(engine, address) as rerun_engine:
                     result = rerun_episodes(p, record, list(report.episodes), found,
                                             workers=workers or rerun_engine.default_workers(), progress=True)
