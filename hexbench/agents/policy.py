@@ -317,16 +317,12 @@ def deterministic_actor(policy):
 
     if not isinstance(policy, BasePolicy):  # any other object with SB3's predict signature
         return lambda scaled_obs: policy.predict(scaled_obs, deterministic=True)[0]
+    shape, squash = policy.action_space.shape, policy.squash_output
+    low, high = policy.action_space.low, policy.action_space.high
     layers = actor_layers(policy)
     if layers is not None:
-        layers = [(op, weight, bias) if weight is None else (op, weight.detach(), bias.detach())
-                  for op, weight, bias in layers]
-
-        def forward(action):
-            for op, weight, bias in layers:
-                action = op(action) if weight is None else op(action, weight, bias)
-            return action
-    elif isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
+        return _flat_actor(layers, shape, policy.unscale_action if squash else None, low, high)
+    if isinstance(policy, ActorCriticPolicy):  # PPO: get_distribution(obs).mode(), the Gaussian's mean
         def forward(obs):
             features = BaseModel.extract_features(policy, obs, policy.pi_features_extractor)
             return policy.action_net(policy.mlp_extractor.forward_actor(features))
@@ -334,13 +330,34 @@ def deterministic_actor(policy):
         def forward(obs):
             return policy._predict(obs, deterministic=True)
     no_grad, as_tensor = torch.no_grad, torch.as_tensor
-    shape, squash = policy.action_space.shape, policy.squash_output
-    low, high = policy.action_space.low, policy.action_space.high
 
     def act(scaled_obs: np.ndarray) -> np.ndarray:
         with no_grad():
             action = forward(as_tensor(np.asarray(scaled_obs, dtype=np.float32)[None])).numpy().reshape(shape)
         return policy.unscale_action(action) if squash else clip_ufunc(action, low, high)
+
+    return act
+
+
+def _flat_actor(layers: list, shape: tuple, unscale, low: np.ndarray, high: np.ndarray):
+    """The act function of `deterministic_actor` for a flat list of layers: each linear layer is
+    the `addmm(bias, x, weight.t())` that `torch.nn.functional.linear` calls for a 2-D input, and
+    each activation runs in place on the fresh tensor that layer made, so the numbers are the
+    same, with fewer Python-to-torch calls. No autograd graph is recorded: the weights are
+    detached and the observation tensor does not require gradients."""
+    import torch
+
+    addmm, from_numpy = torch.addmm, torch.from_numpy
+    in_place = {torch.relu: torch.relu_, torch.tanh: torch.tanh_}
+    steps = [(in_place[op], None, None) if weight is None else (addmm, bias.detach(), weight.detach().t())
+             for op, weight, bias in layers]
+
+    def act(scaled_obs: np.ndarray) -> np.ndarray:
+        x = from_numpy(np.array(scaled_obs, dtype=np.float32).reshape(1, -1))
+        for op, bias, weight_t in steps:
+            x = op(x) if bias is None else op(bias, x, weight_t)
+        action = x.numpy().reshape(shape)
+        return unscale(action) if unscale is not None else clip_ufunc(action, low, high)
 
     return act
 
