@@ -6,6 +6,7 @@
     #                                                             the env step (its physics) and the rest of the loop,
     #                                                             and each process's CPU, switches and faults per step
     python bench/sandbox_overhead.py --per-step --cores 2       # the same on two cores at once, as `hexbench run` loads them
+    python bench/sandbox_overhead.py --act-loop                 # act() of the controller in one process, caches warm
 
 The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
 else process) and in-process (`--isolation none`), alternating A/B/B/A in one run, after an untimed
@@ -205,6 +206,30 @@ def per_step_rounds(controller: str, mode: str, slot: int | None = None) -> list
     return [(isolation, r) for isolation in (mode, "none", mode, "none") for r in per_step_us(controller, isolation)]
 
 
+def report_act_loop(controller: str, calls: int = 3000, loops: int = 3) -> None:
+    """The controller's own act() for rough 3 cm in this process (no limits around it), on one
+    observation of a real episode, `loops` loops of `calls` calls: what a call costs with warm
+    caches (a control step's act() runs with the caches the physics has just evicted: `--per-step`)."""
+    from hexbench.suite import rollout
+
+    task = load_suite("v1").task("rough", 3.0)
+    pin_to_core()
+    ctrl = sandbox.controller_for(controller, task, "none").ctrl
+    env = rollout.make_env(task, ctrl.action_mode)
+    obs, _ = env.reset(seed=1000)
+    env.close()
+    ctrl.reset(5)
+    per_call_us = []
+    for _ in range(loops):
+        t0 = time.perf_counter()
+        for _call in range(calls):
+            ctrl.act(obs)
+        per_call_us.append((time.perf_counter() - t0) / calls * 1e6)
+    sandbox.close_all()
+    print(f"act() in one process, caches warm, {loops} x {calls:,} calls: "
+          + ", ".join(f"{us:.1f}" for us in per_call_us) + f" us per call (min {min(per_call_us):.1f})")
+
+
 def report_per_step(controller: str, cores: int) -> None:
     mode = sandbox.resolve_isolation("auto")
     if cores <= 1:
@@ -241,8 +266,12 @@ def main() -> None:
     ap.add_argument("--rounds", type=int, default=3, help="A/B pairs")
     ap.add_argument("--per-step", action="store_true", help="only the per-step split of a pinned worker, A/B/A/B")
     ap.add_argument("--cores", type=int, default=1, help="with --per-step: that many pinned workers at once")
+    ap.add_argument("--act-loop", action="store_true", help="only act() in one process, caches warm")
     args = ap.parse_args()
     use_controller_math()  # in-process controllers here multiply as in an evaluation worker
+    if args.act_loop:
+        report_act_loop(args.controller)
+        return
     if args.per_step:
         report_per_step(args.controller, args.cores)
         return
