@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 from hexbench import leaderboard as lb
 from hexbench.cli import app
 from hexbench.leaderboard.markdown import md_code, md_table, md_text
-from hexbench.leaderboard.records import TIER_HIDDEN
+from hexbench.leaderboard.records import TIER_HIDDEN, TIER_SELF_REPORTED
 from hexbench.suite import scoring
 from hexbench.suite.tasks import load_suite
 
@@ -763,3 +763,21 @@ def test_a_record_of_paper_table_5_tasks_is_admitted_by_replay_into_its_own_fold
                     record=False, progress=False).error is None
     with pytest.raises(lb.RecordError, match=r"missing episode .*joins only on paper Table 5's tasks \(slopes 10, 11"):
         lb.add(other, board, workers=1)
+
+
+def test_the_trust_column_says_what_was_replayed_and_re_run():
+    from types import SimpleNamespace
+
+    from hexbench.leaderboard.formatting import fmt_trust
+
+    def row(admission, tier=lb.TIER_REPLAYED):
+        return SimpleNamespace(details={"tier": tier, "admission": admission})
+
+    whole = {"episodes_replayed": 860, "episodes_total": 860}
+    rerun = {"isolation": "bubblewrap", "with_run_secret": True}
+    assert fmt_trust(row(whole)) == "sandboxed + replayed"
+    assert fmt_trust(row({**whole, "controller_rerun": {**rerun, "episodes": 860}})) == "sandboxed + replayed + re-run"
+    sampled = {"episodes_replayed": 20, "episodes_total": 860, "controller_rerun": {**rerun, "episodes": 20}}
+    assert fmt_trust(row(sampled)) == "sandboxed + replayed (20 of 860 replayed) + re-run (20 of 860)"
+    assert fmt_trust(row({**whole, "controller_rerun": {"episodes": True}})) == "sandboxed + replayed"
+    assert fmt_trust(row({**whole, "controller_rerun": {**rerun, "episodes": 860}}, TIER_SELF_REPORTED)) == "self-reported"

@@ -176,6 +176,10 @@ def test_leaderboard_admission_can_rerun_the_controller(tiny_protocol, tmp_path)
     assert added.exit_code == 0, added.output
     admission = json.loads((board / "cpg.json").read_text())["admission"]
     assert admission["controller_rerun"] == {"episodes": 6, "isolation": "bubblewrap", "with_run_secret": True}
+    assert "| sandboxed + replayed + re-run |" in (board / "README.md").read_text()
+    replayed_only = CliRunner().invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--workers", "1",
+                                             "--replace"])
+    assert replayed_only.exit_code == 1 and "re-run on 0 episodes" in replayed_only.output
 
     steps_aside = controller(tmp_path, "aside.py", "np.full(18, 0.05)")
     forged = tmp_path / "forged"

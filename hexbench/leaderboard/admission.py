@@ -33,6 +33,7 @@ from hexbench.leaderboard.records import (
     MissingEpisodesError,
     RecordError,
     Row,
+    episodes_rerun,
     measured_row,
     read_record,
     record_files,
@@ -161,6 +162,10 @@ def _refuse_downgrade(dest: Path, record: dict, where: str) -> None:
     if new_tier == old_tier and new_share < old_share:
         raise RecordError(f"{where}: replayed {new_share:.0%} of its episodes, {dest} {old_share:.0%}; --replace never "
                           f"puts a less proven record in its place (admit it with fewer --sample or none)")
+    old_rerun, new_rerun = episodes_rerun(old.get("admission") or {}), episodes_rerun(record["admission"])
+    if new_tier == old_tier and new_rerun < old_rerun:
+        raise RecordError(f"{where}: its controller was re-run on {new_rerun} episodes, {dest}'s on {old_rerun}; "
+                          f"--replace never puts a less proven record in its place (admit it with --rerun)")
 
 
 def add(result_path: str | Path, directory: str | Path = "leaderboard", replace: bool = False,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import re
 
-from hexbench.leaderboard.records import TIER_SELF_REPORTED, Row
+from hexbench.leaderboard.records import TIER_SELF_REPORTED, Row, episodes_rerun
 from hexbench.suite.tasks import format_level
 
 REPORTED_NOTE = "reported by the paper, not run here"
@@ -37,9 +37,16 @@ def reported_name(row: Row) -> str:
 
 
 def fmt_trust(row: Row) -> str:
+    """The row's trust tier, with how much of it was replayed where not all, and "+ re-run" where
+    admission also played the episodes again with the named controller (`leaderboard add --rerun`)."""
     tier = row.details.get("tier", TIER_SELF_REPORTED)
+    if tier == TIER_SELF_REPORTED:
+        return tier
     admission = row.details.get("admission") or {}
     replayed, total = admission.get("episodes_replayed"), admission.get("episodes_total")
-    if tier != TIER_SELF_REPORTED and replayed is not None and total and replayed < total:
-        return f"{tier} ({replayed} of {total} replayed)"
-    return tier
+    text = f"{tier} ({replayed} of {total} replayed)" if replayed is not None and total and replayed < total else tier
+    rerun = episodes_rerun(admission)
+    if rerun:
+        text += " + re-run" + (f" ({rerun} of {total})" if total and rerun < total else "")
+    return text
+

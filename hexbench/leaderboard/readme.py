@@ -27,8 +27,9 @@ TRAINING_NOTE = ("Training budget: the stated env-step budget the controller's s
 
 TRUST_NOTE = ("Trust: `sandboxed + replayed` entries were made with the controller in its own sandboxed process "
               "and admitted by `hexbench leaderboard add RUN_DIR`, which replayed their episodes from the action "
-              "logs alone (all of them, or the stated sample); `+ hidden seeds` were scored on episodes derived "
-              "from a maintainer's secret key; `self-reported` entries were not replayed (records made before "
+              "logs alone (all of them, or the stated sample); `+ re-run` entries were also played again with "
+              "their named controller and weights, which chose every recorded action; `+ hidden seeds` were "
+              "scored on episodes derived from a maintainer's secret key; `self-reported` entries were not replayed (records made before "
               "sandboxing, or added without their run folder) and are ranked alongside but not proven.")
 
 DEFINITIONS = (

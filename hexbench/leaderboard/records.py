@@ -223,6 +223,13 @@ def record_tier(record: dict, where: str) -> str:
     return TIER_HIDDEN if keyed and key_was_hidden(isolation) else TIER_REPLAYED
 
 
+def episodes_rerun(admission: dict) -> int:
+    """How many episodes admission played again with the named controller (0: none)."""
+    rerun = admission.get("controller_rerun")
+    episodes = rerun.get("episodes") if isinstance(rerun, dict) else None
+    return episodes if isinstance(episodes, int) and not isinstance(episodes, bool) and episodes > 0 else 0
+
+
 def key_was_hidden(isolation: dict) -> bool:
     """Whether the controller process of a keyed run could not read the key: bubblewrap covers it
     up; under process isolation Landlock keeps the controller to its own folders, and without it
