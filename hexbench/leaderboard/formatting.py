@@ -49,4 +49,3 @@ def fmt_trust(row: Row) -> str:
     if rerun:
         text += " + re-run" + (f" ({rerun} of {total})" if total and rerun < total else "")
     return text
-

@@ -29,8 +29,9 @@ TRUST_NOTE = ("Trust: `sandboxed + replayed` entries were made with the controll
               "and admitted by `hexbench leaderboard add RUN_DIR`, which replayed their episodes from the action "
               "logs alone (all of them, or the stated sample); `+ re-run` entries were also played again with "
               "their named controller and weights, which chose every recorded action; `+ hidden seeds` were "
-              "scored on episodes derived from a maintainer's secret key; `self-reported` entries were not replayed (records made before "
-              "sandboxing, or added without their run folder) and are ranked alongside but not proven.")
+              "scored on episodes derived from a maintainer's secret key; `self-reported` entries were not "
+              "replayed (records made before sandboxing, or added without their run folder) and are ranked "
+              "alongside but not proven.")
 
 DEFINITIONS = (
     "- **Success**: the base advances 2.5 m along +x within the step limit, never more than 0.8 m off in "
