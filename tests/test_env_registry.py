@@ -1,5 +1,10 @@
 """Every registered hexbench id: `gymnasium.make` works, Gymnasium's `check_env` passes with no warnings,
-the registration is plain data (EnvSpec JSON round trip) with the task's step limit."""
+the registration is plain data (EnvSpec JSON round trip) with the task's step limit.
+
+The default run builds and checks a representative set of ids (every action mode on flat ground,
+each curriculum, the easiest and hardest full-run level of each terrain, the hardest mixed-course
+level); the other levels, which differ from those only in their numbers, run with `-m slow`.
+"""
 
 from __future__ import annotations
 
@@ -17,6 +22,31 @@ from hexbench.world.env import ACTION_MODES
 
 IDS = registered_ids()
 SUITE = load_suite("v1")
+
+
+def _representative_ids() -> set[str]:
+    ids = set()
+    for mode in ACTION_MODES:
+        m = MODE_IDS[mode]
+        ids.add(f"hexbench/Flat-{m}-v1")
+        for terrain in SUITE.terrains:
+            levels = [t for t in SUITE.tasks if t.terrain == terrain]
+            ids |= {f"hexbench/{terrain.capitalize()}-Curriculum-{m}-v1", levels[0].gym_id(mode), levels[-1].gym_id(mode)}
+        ids.add(SUITE.extra_tasks[-1].gym_id(mode))
+    return ids
+
+
+REPRESENTATIVE = _representative_ids()
+# every id; those outside REPRESENTATIVE only with `-m slow` (some 0.4 s each to build and check)
+SWEEP = [env_id if env_id in REPRESENTATIVE else pytest.param(env_id, marks=pytest.mark.slow) for env_id in IDS]
+
+
+def test_the_default_run_checks_every_kind_of_id() -> None:
+    assert REPRESENTATIVE <= set(IDS)
+    assert len(REPRESENTATIVE) == len(ACTION_MODES) * (1 + 3 * len(SUITE.terrains) + 1)
+    for kind in ("Flat", "Curriculum", "Rough", "Slopes", "Stairs", "Mixed"):
+        for m in MODE_IDS.values():
+            assert any(kind in i and f"-{m}-" in i for i in REPRESENTATIVE), (kind, m)
 
 
 def test_every_suite_level_curriculum_and_flat_is_registered_for_every_mode() -> None:
@@ -37,7 +67,7 @@ def test_every_suite_level_curriculum_and_flat_is_registered_for_every_mode() ->
 WRAPPED_ENV_NOTICE = ".*is different from the unwrapped version"
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", SWEEP)
 def test_check_env_passes_without_warnings(env_id: str) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # any warning from Gymnasium's checkers fails the test
@@ -83,12 +113,15 @@ def test_registered_config_is_the_task_spec() -> None:
         env.close()
 
 
-@pytest.mark.parametrize("env_id", IDS)
-def test_registration_round_trips_through_json_and_makes_a_working_env(env_id: str) -> None:
-    spec = gym.spec(env_id)
-    again = EnvSpec.from_json(spec.to_json())
-    assert again == spec
-    env = gym.make(again)
+def test_every_registration_round_trips_through_json() -> None:
+    for env_id in IDS:
+        spec = gym.spec(env_id)
+        assert EnvSpec.from_json(spec.to_json()) == spec, env_id
+
+
+@pytest.mark.parametrize("env_id", SWEEP)
+def test_registration_from_json_makes_a_working_env(env_id: str) -> None:
+    env = gym.make(EnvSpec.from_json(gym.spec(env_id).to_json()))
     try:
         obs, _ = env.reset(seed=0)
         assert env.observation_space.contains(obs)
