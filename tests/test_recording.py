@@ -9,6 +9,7 @@ import sys
 import textwrap
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 import jsonschema
 import numpy as np
@@ -16,6 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 from hexbench.cli import app
+from hexbench.errors import OutputError
 from hexbench.evaluation.episode import EpisodeJob, run_episode
 from hexbench.recording import make_episode_recorder
 from hexbench.recording.mcap_episode import METRICS_SCHEMA, TOPICS
@@ -233,7 +235,41 @@ def test_failure_while_writing_leaves_no_partial_file(tmp_path, monkeypatch):
         raise OSError("disk full")
 
     monkeypatch.setattr(recorder, "write_episode_rrd", broken_rrd)
-    with pytest.raises(OSError, match="disk full"):
+    with pytest.raises(OutputError, match=r"-00\.rrd: cannot be written \(disk full\)$"):
+        record_short_episode(tmp_path, steps=5)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_failed_rerun_write_is_one_output_error_and_leaves_no_partial_file(tmp_path, monkeypatch):
+    """Rerun's writer says only "File-writer thread shut down prematurely" when the disk fills
+    under it: the line names the file and, from the space left, the full disk."""
+    import shutil
+
+    import hexbench.recording.recorder as recorder
+
+    def full_disk_rrd(path, *args, **kwargs):
+        Path(path).write_bytes(b"half a file")
+        monkeypatch.setattr(shutil, "disk_usage", lambda folder: SimpleNamespace(total=10 << 30, used=10 << 30, free=0))
+        raise RuntimeError("File-writer thread shut down prematurely")
+
+    monkeypatch.setattr(recorder, "write_episode_rrd", full_disk_rrd)
+    with pytest.raises(OutputError, match=r"\.rrd: cannot be written \(no space left on device\)$"):
+        record_short_episode(tmp_path, steps=5)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_no_rerun_write_starts_on_a_disk_without_room_for_it(tmp_path, monkeypatch):
+    """Rerun's writer never returns when it starts a file on a full disk: it is not called then."""
+    import shutil
+
+    import hexbench.recording.recorder as recorder
+
+    def must_not_run(*args, **kwargs):
+        raise AssertionError("the .rrd writer was called on a full disk")
+
+    monkeypatch.setattr(recorder, "write_episode_rrd", must_not_run)
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: SimpleNamespace(total=10 << 30, used=(10 << 30) - 4096, free=4096))
+    with pytest.raises(OutputError, match=r"\.rrd: cannot be written \(no space left on device\)$"):
         record_short_episode(tmp_path, steps=5)
     assert list(tmp_path.iterdir()) == []
 

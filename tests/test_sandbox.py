@@ -2,6 +2,7 @@
 
 import json
 import os
+import sys
 import tempfile
 import textwrap
 import time
@@ -298,6 +299,65 @@ def test_unwritable_outputs_are_one_line_and_leave_nothing(tmp_path, make_out):
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert res.exit_code == 1 and len(lines) == 1 and expect in lines[0], res.output
     assert "Traceback" not in res.output
+
+
+def _small_disk(folder: Path, size_bytes: int) -> list[str] | None:
+    """The bwrap command prefix that runs a command with a `size_bytes` tmpfs mounted on `folder`
+    and everything else as it is, or None where bubblewrap cannot make one."""
+    import shutil
+    import subprocess
+
+    folder.mkdir(parents=True, exist_ok=True)
+    prefix = ["bwrap", "--dev-bind", "/", "/", "--size", str(size_bytes), "--tmpfs", str(folder), "--"]
+    if shutil.which("bwrap") is None or subprocess.run([*prefix, "true"], capture_output=True).returncode != 0:
+        return None
+    return prefix
+
+
+NOISY = """
+import numpy as np
+
+class Noisy:
+    action_mode = "cpg_residual"
+
+    def reset(self, seed):
+        self.rng = np.random.default_rng(seed)
+
+    def act(self, obs):  # small random residuals: an action log that does not compress
+        return self.rng.uniform(-0.05, 0.05, 18).astype(np.float32)
+
+def make_controller(task):
+    return Noisy()
+"""
+
+
+@pytest.mark.parametrize("what_fills_it", ["action logs", "recording"])
+def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, what_fills_it):
+    """A run onto a small file system (a tmpfs): the write that finds the disk full, whichever it
+    is (an episode's action log in the evaluator; its MCAP or .rrd in a pool worker, where Rerun's
+    writer would never return on a full disk), is one line, and the run leaves no file."""
+    import subprocess
+
+    disk = tmp_path / "disk"
+    size_bytes = 64 << 10 if what_fills_it == "action logs" else 1 << 20
+    prefix = _small_disk(disk, size_bytes)
+    if prefix is None:
+        pytest.skip("bubblewrap cannot mount a tmpfs here")
+    if what_fills_it == "action logs":
+        (tmp_path / "noisy.py").write_text(NOISY)
+        args = [str(tmp_path / "noisy.py"), "--workers", "1", "--no-record"]
+    else:
+        args = [CPG, "--workers", "2"]
+    run = " ".join([sys.executable, "-m", "hexbench", "run", *args, "--terrain", "stairs", "--levels", "2",
+                    "--episodes", "4", "--isolation", "process", "--out", str(disk / "out")])
+    shown = subprocess.run([*prefix, "sh", "-c", f"{run}; echo rc=$?; find {disk} -mindepth 1"], cwd=REPO,
+                           capture_output=True, text=True, timeout=300)
+    lines = shown.stdout.splitlines()
+    assert "rc=1" in lines, shown.stdout + shown.stderr
+    assert lines[lines.index("rc=1") + 1:] == []  # nothing left on the disk
+    errors = [ln for ln in shown.stderr.splitlines() if ln.startswith("error: ")]
+    assert len(errors) == 1 and errors[0].endswith(": cannot be written (no space left on device)"), shown.stderr
+    assert "Traceback" not in shown.stderr
 
 
 def test_a_failing_run_into_an_existing_folder_keeps_the_earlier_runs_files(tmp_path):

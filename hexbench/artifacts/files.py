@@ -33,7 +33,7 @@ READ_BLOCK_BYTES = 1 << 20
 
 
 def os_reason(error: OSError) -> str:
-    return _REASONS.get(error.errno, error.strerror or type(error).__name__)
+    return _REASONS.get(error.errno, error.strerror or " ".join(str(error).split())[:200] or type(error).__name__)
 
 
 def sha256_file(path: str | Path, max_bytes: int | None = None, what: str = "file") -> str:
