@@ -360,6 +360,36 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, what_fills_it):
     assert "Traceback" not in shown.stderr
 
 
+def test_a_full_temporary_folder_is_one_line_and_leaves_nothing(tmp_path):
+    """The evaluator writes the robot's URDF to the temporary folder (PyBullet loads files only)."""
+    import subprocess
+
+    prefix = _small_disk(Path(tempfile.gettempdir()), 4096)
+    if prefix is None:
+        pytest.skip("bubblewrap cannot mount a tmpfs here")
+    check = f"{sys.executable} -m hexbench check {CPG} --steps 3 --isolation process"
+    shown = subprocess.run([*prefix, "sh", "-c", f"{check}; echo rc=$?; find {tempfile.gettempdir()} -mindepth 1"],
+                           cwd=REPO, capture_output=True, text=True, timeout=120)
+    assert shown.stdout.splitlines() == ["rc=1"], shown.stdout + shown.stderr
+    errors = [ln for ln in shown.stderr.splitlines() if ln.strip()]
+    assert len(errors) == 1 and errors[0].endswith(": cannot write the robot's URDF (no space left on device)"), errors
+
+
+def test_a_controller_process_folder_that_cannot_be_made_is_one_line(tmp_path, monkeypatch):
+    import errno
+    from types import SimpleNamespace
+
+    from hexbench.errors import OutputError
+
+    def no_space(prefix):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
+
+    monkeypatch.setattr(sandbox, "tempfile", SimpleNamespace(mkdtemp=no_space, gettempdir=lambda: "/tmp"))
+    with pytest.raises(OutputError, match=r"^/tmp: cannot make the folder of .*cpg.py's controller process "
+                                          r"\(no space left on device\)$"):
+        sandbox.ControllerProcess(CPG, "process")
+
+
 def test_a_failing_run_into_an_existing_folder_keeps_the_earlier_runs_files(tmp_path):
     out = tmp_path / "out"
     tasks = [load_suite("v1").task("stairs", 2)]

@@ -50,7 +50,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from hexbench.artifacts.files import sha256_file
+from hexbench.artifacts.files import os_reason, sha256_file
+from hexbench.errors import OutputError
 from hexbench.evaluation import wire
 from hexbench.evaluation.in_process import InProcessController
 from hexbench.evaluation.isolation import (
@@ -255,28 +256,26 @@ class ControllerProcess:
         if not self.path.is_file():
             raise ControllerError(f"{self.file}: no such controller file")
         _remove_orphaned_sandbox_folders_once()
-        self._tmp = tempfile.mkdtemp(prefix=f"{SANDBOX_FOLDER_PREFIX}{os.getpid()}-")
-        self._stderr = open(Path(self._tmp) / "stderr", "w+b")
+        self._tmp, self._stderr = None, None
+        try:
+            scratch, landlock_rules_file = self._make_folders()
+        except OSError as e:
+            if self._stderr is not None:
+                self._stderr.close()
+            if self._tmp is not None:
+                shutil.rmtree(self._tmp, ignore_errors=True)
+            raise OutputError(f"{tempfile.gettempdir()}: cannot make the folder of {self.file}'s controller process "
+                              f"({os_reason(e)})") from None
         to_child_r, self._to_child = os.pipe()
         self._from_child, from_child_w = os.pipe()
         host = [sys.executable, "-I", "-B", "-c", controller_host_boot(), str(to_child_r), str(from_child_w),
-                "on" if seccomp_available() else "off", "off"]
+                "on" if seccomp_available() else "off", landlock_rules_file or "off"]
         drop = runs_as_nobody(self.path)
         if self.isolation == "bubblewrap":
             argv, cwd, env, die = bwrap_argv(self.path.parent, self.limits, self.hidden) + ["--"] + host, "/", \
                 clean_env("/scratch"), False
         else:
             hide_from_controllers()  # the same user may run it: it must not reach this process's memory
-            scratch = Path(self._tmp) / "scratch"
-            scratch.mkdir()
-            if drop:
-                os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
-                os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
-            if landlock_abi():  # the rules go in a file: one per entry of a folder can outgrow an argument
-                rules = Path(self._tmp) / "landlock-rules.json"
-                rules.write_text(json.dumps(landlock_rules(self.path.parent, scratch, self.hidden)))
-                rules.chmod(0o644)
-                host[-1] = str(rules)
             argv, cwd, env, die = host, str(scratch), clean_env(str(scratch)), True
             self.scratch = str(scratch)
         drop_capabilities = self.isolation == "process" and os.geteuid() == 0 and not drop
@@ -295,6 +294,27 @@ class ControllerProcess:
         self._poll_in.register(self._from_child, select.POLLIN | select.POLLHUP | select.POLLERR)
         self._poll_out = select.poll()
         self._poll_out.register(self._to_child, select.POLLOUT | select.POLLERR)
+
+    def _make_folders(self) -> tuple[Path | None, str | None]:
+        """The controller process's folder in the temporary folder, with its stderr file; under
+        process isolation also its scratch folder and, where Landlock works, its rules file (the
+        rules go in a file: one per entry of a folder can outgrow an argument). Returns (scratch
+        folder, rules file), each None where there is none."""
+        self._tmp = tempfile.mkdtemp(prefix=f"{SANDBOX_FOLDER_PREFIX}{os.getpid()}-")
+        self._stderr = open(Path(self._tmp) / "stderr", "w+b")
+        if self.isolation == "bubblewrap":
+            return None, None
+        scratch = Path(self._tmp) / "scratch"
+        scratch.mkdir()
+        if runs_as_nobody(self.path):
+            os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
+            os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
+        if not landlock_abi():
+            return scratch, None
+        rules = Path(self._tmp) / "landlock-rules.json"
+        rules.write_text(json.dumps(landlock_rules(self.path.parent, scratch, self.hidden)))
+        rules.chmod(0o644)
+        return scratch, str(rules)
 
     # -- wire
     def _fail(self, problem: str, context: str) -> ControllerError:

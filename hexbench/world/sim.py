@@ -42,6 +42,7 @@ def _import_pybullet_quietly():
 
 p = _import_pybullet_quietly()
 
+from hexbench.errors import OutputError
 from hexbench.world.robot import FOOT_LINK_NAMES, NUM_JOINTS, JetHexaSpec, urdf_text
 from hexbench.world.terrain import BuiltTerrain, Terrain
 
@@ -90,10 +91,18 @@ class RobotState:
 
 @lru_cache(maxsize=4)
 def _urdf_file(spec: JetHexaSpec) -> str:
-    """Write the robot URDF once per process and spec (PyBullet loads URDF from files only)."""
-    fd, path = tempfile.mkstemp(prefix="jethexa_", suffix=".urdf")
-    with os.fdopen(fd, "w") as f:
-        f.write(urdf_text(spec))
+    """Write the robot URDF once per process and spec (PyBullet loads URDF from files only); a
+    temporary folder that cannot take it (full, read-only) is one OutputError line."""
+    try:
+        fd, path = tempfile.mkstemp(prefix="jethexa_", suffix=".urdf")
+    except OSError as e:
+        raise OutputError(f"{tempfile.gettempdir()}: cannot write the robot's URDF there ({(e.strerror or str(e)).lower()})") from None
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(urdf_text(spec))
+    except OSError as e:
+        os.unlink(path)
+        raise OutputError(f"{path}: cannot write the robot's URDF ({(e.strerror or str(e)).lower()})") from None
     return path
 
 
