@@ -31,7 +31,8 @@ def _representative_ids() -> set[str]:
         ids.add(f"hexbench/Flat-{m}-v1")
         for terrain in SUITE.terrains:
             levels = [t for t in SUITE.tasks if t.terrain == terrain]
-            ids |= {f"hexbench/{terrain.capitalize()}-Curriculum-{m}-v1", levels[0].gym_id(mode), levels[-1].gym_id(mode)}
+            ids.add(f"hexbench/{terrain.capitalize()}-Curriculum-{m}-v1")
+            ids |= {levels[0].gym_id(mode), levels[-1].gym_id(mode)}
         ids.add(SUITE.extra_tasks[-1].gym_id(mode))
     return ids
 

@@ -268,7 +268,8 @@ def test_no_rerun_write_starts_on_a_disk_without_room_for_it(tmp_path, monkeypat
         raise AssertionError("the .rrd writer was called on a full disk")
 
     monkeypatch.setattr(recorder, "write_episode_rrd", must_not_run)
-    monkeypatch.setattr(shutil, "disk_usage", lambda folder: SimpleNamespace(total=10 << 30, used=(10 << 30) - 4096, free=4096))
+    almost_full = SimpleNamespace(total=10 << 30, used=(10 << 30) - 4096, free=4096)
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: almost_full)
     with pytest.raises(OutputError, match=r"\.rrd: cannot be written \(no space left on device\)$"):
         record_short_episode(tmp_path, steps=5)
     assert list(tmp_path.iterdir()) == []

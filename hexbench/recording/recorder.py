@@ -48,7 +48,8 @@ def _rrd_write_failure(folder: Path, error: RuntimeError) -> OSError:
         full = shutil.disk_usage(folder).free < FULL_DISK_BYTES
     except OSError:
         full = False
-    return OSError(errno.ENOSPC if full else errno.EIO, f"Rerun's file writer failed: {' '.join(str(error).split())[:200]}")
+    said = " ".join(str(error).split())[:200]
+    return OSError(errno.ENOSPC if full else errno.EIO, f"Rerun's file writer failed: {said}")
 
 
 @dataclass(frozen=True)

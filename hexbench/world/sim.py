@@ -96,7 +96,8 @@ def _urdf_file(spec: JetHexaSpec) -> str:
     try:
         fd, path = tempfile.mkstemp(prefix="jethexa_", suffix=".urdf")
     except OSError as e:
-        raise OutputError(f"{tempfile.gettempdir()}: cannot write the robot's URDF there ({(e.strerror or str(e)).lower()})") from None
+        reason = (e.strerror or str(e)).lower()
+        raise OutputError(f"{tempfile.gettempdir()}: cannot write the robot's URDF there ({reason})") from None
     try:
         with os.fdopen(fd, "w") as f:
             f.write(urdf_text(spec))
