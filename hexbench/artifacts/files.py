@@ -13,7 +13,6 @@ a name too long, a full disk) removes the temporary file and becomes one `Output
 
 from __future__ import annotations
 
-import errno
 import hashlib
 import json
 import os
@@ -22,18 +21,9 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from hexbench.errors import InputError, OutputError
+from hexbench.errors import InputError, OutputError, os_reason
 
-_REASONS = {errno.EROFS: "read-only file system", errno.EACCES: "permission denied", errno.EPERM: "permission denied",
-            errno.ENOTDIR: "a path component is a file, not a folder", errno.EISDIR: "is a folder",
-            errno.ENAMETOOLONG: "file name too long", errno.ENOSPC: "no space left on device",
-            errno.EDQUOT: "disk quota exceeded", errno.EEXIST: "exists and is not a folder",
-            errno.ENOENT: "no such file", errno.ELOOP: "too many levels of symbolic links"}
 READ_BLOCK_BYTES = 1 << 20
-
-
-def os_reason(error: OSError) -> str:
-    return _REASONS.get(error.errno, error.strerror or " ".join(str(error).split())[:200] or type(error).__name__)
 
 
 def sha256_file(path: str | Path, max_bytes: int | None = None, what: str = "file") -> str:

@@ -28,14 +28,13 @@ from hexbench.artifacts.files import (
     atomic_path,
     check_writable,
     make_folder,
-    os_reason,
     read_bytes_bounded,
     sha256_file,
     write_text_atomic,
 )
 from hexbench.artifacts.provenance import HEXBENCH_VERSION, git_commit, machine_info
 from hexbench.artifacts.records import episode_record_rows, episodes_digest, validate_record
-from hexbench.errors import HexbenchError, InputError, OutputError
+from hexbench.errors import HexbenchError, InputError, OutputError, os_reason
 from hexbench.evaluation import engines, sandbox
 from hexbench.evaluation.episode import EpisodeJob, controller_changed, file_change, first_row_difference, replay_row
 from hexbench.evaluation.isolation import seed_key_problem

@@ -50,8 +50,8 @@ import tempfile
 import time
 from pathlib import Path
 
-from hexbench.artifacts.files import os_reason, sha256_file
-from hexbench.errors import OutputError
+from hexbench.artifacts.files import sha256_file
+from hexbench.errors import OutputError, os_reason
 from hexbench.evaluation import wire
 from hexbench.evaluation.in_process import InProcessController
 from hexbench.evaluation.isolation import (

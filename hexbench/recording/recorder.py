@@ -20,8 +20,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from hexbench.artifacts.files import make_folder, os_reason, sha256_bytes, sha256_file
-from hexbench.errors import OutputError
+from hexbench.artifacts.files import make_folder, sha256_bytes, sha256_file
+from hexbench.errors import OutputError, os_reason
 from hexbench.recording.capture import EpisodeCapture
 from hexbench.recording.kinematics import joint_frames
 from hexbench.recording.mcap_episode import McapPrecision, write_episode_mcap

@@ -34,7 +34,8 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from hexbench.artifacts.files import file_kind, os_reason, sha256_file
+from hexbench.artifacts.files import file_kind, sha256_file
+from hexbench.errors import os_reason
 from hexbench.errors import HexbenchError
 from hexbench.world.env import ACTION_MODES
 from hexbench.world.sim import clip_ufunc

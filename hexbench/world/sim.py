@@ -42,7 +42,7 @@ def _import_pybullet_quietly():
 
 p = _import_pybullet_quietly()
 
-from hexbench.errors import OutputError
+from hexbench.errors import OutputError, os_reason
 from hexbench.world.robot import FOOT_LINK_NAMES, NUM_JOINTS, JetHexaSpec, urdf_text
 from hexbench.world.terrain import BuiltTerrain, Terrain
 
@@ -96,14 +96,13 @@ def _urdf_file(spec: JetHexaSpec) -> str:
     try:
         fd, path = tempfile.mkstemp(prefix="jethexa_", suffix=".urdf")
     except OSError as e:
-        reason = (e.strerror or str(e)).lower()
-        raise OutputError(f"{tempfile.gettempdir()}: cannot write the robot's URDF there ({reason})") from None
+        raise OutputError(f"{tempfile.gettempdir()}: cannot write the robot's URDF there ({os_reason(e)})") from None
     try:
         with os.fdopen(fd, "w") as f:
             f.write(urdf_text(spec))
     except OSError as e:
         os.unlink(path)
-        raise OutputError(f"{path}: cannot write the robot's URDF ({(e.strerror or str(e)).lower()})") from None
+        raise OutputError(f"{path}: cannot write the robot's URDF ({os_reason(e)})") from None
     return path
 
 
