@@ -257,8 +257,9 @@ class ControllerProcess:
             raise ControllerError(f"{self.file}: no such controller file")
         _remove_orphaned_sandbox_folders_once()
         self._tmp, self._stderr = None, None
+        drop = runs_as_nobody(self.path)
         try:
-            scratch, landlock_rules_file = self._make_folders()
+            scratch, landlock_rules_file = self._make_folders(drop)
         except OSError as e:
             if self._stderr is not None:
                 self._stderr.close()
@@ -270,7 +271,6 @@ class ControllerProcess:
         self._from_child, from_child_w = os.pipe()
         host = [sys.executable, "-I", "-B", "-c", controller_host_boot(), str(to_child_r), str(from_child_w),
                 "on" if seccomp_available() else "off", landlock_rules_file or "off"]
-        drop = runs_as_nobody(self.path)
         if self.isolation == "bubblewrap":
             argv, cwd, env, die = bwrap_argv(self.path.parent, self.limits, self.hidden) + ["--"] + host, "/", \
                 clean_env("/scratch"), False
@@ -295,18 +295,19 @@ class ControllerProcess:
         self._poll_out = select.poll()
         self._poll_out.register(self._to_child, select.POLLOUT | select.POLLERR)
 
-    def _make_folders(self) -> tuple[Path | None, str | None]:
+    def _make_folders(self, for_nobody: bool) -> tuple[Path | None, str | None]:
         """The controller process's folder in the temporary folder, with its stderr file; under
-        process isolation also its scratch folder and, where Landlock works, its rules file (the
-        rules go in a file: one per entry of a folder can outgrow an argument). Returns (scratch
-        folder, rules file), each None where there is none."""
+        process isolation also its scratch folder (owned by nobody where `for_nobody`: the process
+        runs as nobody) and, where Landlock works, its rules file (the rules go in a file: one per
+        entry of a folder can outgrow an argument). Returns (scratch folder, rules file), each None
+        where there is none."""
         self._tmp = tempfile.mkdtemp(prefix=f"{SANDBOX_FOLDER_PREFIX}{os.getpid()}-")
         self._stderr = open(Path(self._tmp) / "stderr", "w+b")
         if self.isolation == "bubblewrap":
             return None, None
         scratch = Path(self._tmp) / "scratch"
         scratch.mkdir()
-        if runs_as_nobody(self.path):
+        if for_nobody:
             os.chown(self._tmp, SANDBOX_UID, SANDBOX_UID)
             os.chown(scratch, SANDBOX_UID, SANDBOX_UID)
         if not landlock_abi():

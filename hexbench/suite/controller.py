@@ -35,8 +35,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 
 from hexbench.artifacts.files import file_kind, sha256_file
-from hexbench.errors import os_reason
-from hexbench.errors import HexbenchError
+from hexbench.errors import HexbenchError, os_reason
 from hexbench.world.env import ACTION_MODES
 from hexbench.world.sim import clip_ufunc
 
