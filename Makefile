@@ -30,9 +30,14 @@ browser:
 	@test -x /usr/bin/chromium || (apt-get update && apt-get install -y chromium) \
 		|| echo "chromium could not be installed; the leaderboard browser test will skip"
 
+# One test process per core (pytest-xdist; at most 4, each holds torch and PyBullet), each test file
+# in one of them: the red-team attacks look for leftovers machine-wide and must not run side by side,
+# and a module's fixtures (the Ray cluster) are made once. Plain `pytest` runs in one process.
+PYTEST_PARALLEL ?= -n auto --maxprocesses 4 --dist loadfile
+
 test: setup browser
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q $(PYTEST_PARALLEL)
 
 test-all: setup
 	$(PY) -m pip install -q --disable-pip-version-check -e ".[ray]"
-	$(PY) -m pytest -q -m "slow or not slow"
+	$(PY) -m pytest -q $(PYTEST_PARALLEL) -m "slow or not slow"

@@ -1,8 +1,26 @@
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 import pytest
 
 REPO = Path(__file__).resolve().parent.parent
+
+
+def pytest_configure(config):
+    """Under pytest-xdist (`make test` runs one test process per core) each test process and every
+    run it starts get a temporary folder of their own: tests that look for what a run left in the
+    temporary folder (sandbox folders, Ray worker folders, the screenshot) must not see another
+    test process's runs."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if not worker:
+        return
+    own = Path(tempfile.gettempdir()) / f"hexbench-tests-{worker}-{os.getpid()}"
+    own.mkdir(mode=0o700)
+    os.environ["TMPDIR"] = str(own)
+    tempfile.tempdir = None  # gettempdir() reads TMPDIR again
+    config.add_cleanup(lambda: shutil.rmtree(own, ignore_errors=True))
 
 
 @pytest.fixture

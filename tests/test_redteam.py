@@ -43,6 +43,9 @@ REPO = Path(__file__).resolve().parent.parent
 CONTROLLERS = REPO / "tests" / "controllers"
 CPG = REPO / "baselines" / "cpg.py"
 MARKER = "hexbench-attack-marker"  # in the argv of every process an attack leaves behind
+# `make test` runs pytest-xdist with --dist loadfile, so the attacks run one at a time in one test
+# process: what one attack leaves behind is looked for machine-wide (the marker, the corpus file's
+# path), and a second attack running beside it would be counted as its leftover, and killed.
 OUTPUT_MARKER = "hexbench-attack-output"  # in every text an attack prints
 HAVE_BWRAP = shutil.which("bwrap") is not None
 CONTROL_CHARS = re.compile(r"[\x00-\x08\x0b-\x1f\x7f]")  # what may not reach the user's terminal

@@ -5,6 +5,7 @@ are not come back. (The same batch on a two-node Ray cluster: tests/test_ray_eng
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 import pytest
@@ -29,8 +30,13 @@ TINY_PPO = ["--set", "n_steps=64", "--set", "batch_size=32", "--set", "n_epochs=
 
 
 def batch_cli(out: Path, *extra: str):
-    return CliRunner().invoke(app, ["train", str(PPO_CPG), "--steps", "64", *TINY_PPO, "--out", str(out),
-                                    "--no-progress", "--parallel", "1", *extra])
+    """`hexbench train ...` as typed: the batch writes each run's own command from sys.argv, so the
+    command line is set as the console script would see it (not the test runner's)."""
+    args = ["train", str(PPO_CPG), "--steps", "64", *TINY_PPO, "--out", str(out), "--no-progress", "--parallel", "1",
+            *extra]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(sys, "argv", ["hexbench", *args])
+        return CliRunner().invoke(app, args)
 
 
 def test_seed_and_terrain_lists_parse_and_bad_ones_are_one_line():
