@@ -193,6 +193,18 @@ def test_killed_run_leaves_no_worker_processes(tmp_path, sig):
     assert not left, f"sandbox folders of the killed run left behind: {left}"
 
 
+def test_a_run_leaves_nothing_in_the_temporary_folder(tmp_path):
+    """The robot's URDF that each worker writes for PyBullet, the sandbox folders and the episode
+    scratch files all go with the run (recording on, two workers)."""
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    done = subprocess.run([sys.executable, "-m", "hexbench.cli", "run", CPG, "--terrain", "stairs", "--levels", "2",
+                           "--episodes", "2", "--workers", "2", "--out", str(tmp_path / "run")],
+                          cwd=REPO, capture_output=True, text=True, timeout=300, env={**os.environ, "TMPDIR": str(temp)})
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in temp.iterdir()) == []
+
+
 def test_two_workers_give_the_same_record_as_one(tmp_path):
     task = replace(load_suite("v1").task("rough", 8), episodes=3, max_steps=90)
     one = evaluate(CPG, [task], tmp_path / "w1", workers=1, record=False, progress=False).record

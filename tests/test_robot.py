@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -234,3 +237,28 @@ def test_spec_is_frozen_and_drives_the_urdf(client: int) -> None:
     masses = [p.getDynamicsInfo(free, link, physicsClientId=client)[0] for link in range(-1, NUM_JOINTS)]
     assert sum(masses) == pytest.approx(longer.total_mass_kg, abs=1e-6)
     assert longer.total_mass_kg == pytest.approx(2.9)
+
+
+def test_the_files_pybullet_loads_go_when_the_process_that_wrote_them_exits(tmp_path):
+    """PyBullet loads the robot's URDF and the plain terrain texture from files: each process writes
+    them once and removes them at exit, and a fork of it that exits leaves them to their owner."""
+    script = (
+        "import os, sys\n"
+        "from hexbench.perception.views import _white_texture_file\n"
+        "from hexbench.world.robot import JetHexaSpec\n"
+        "from hexbench.world.sim import _urdf_file\n"
+        "files = [_urdf_file(JetHexaSpec()), _white_texture_file()]\n"
+        "pid = os.fork()\n"
+        "if pid == 0:\n"
+        "    sys.exit(0)\n"
+        "os.waitpid(pid, 0)\n"
+        "assert all(os.path.exists(f) for f in files), 'a fork removed its parent files'\n"
+        "print(len(files))\n"
+    )
+    temp = tmp_path / "temp"
+    temp.mkdir()
+    done = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120,
+                          env={**os.environ, "TMPDIR": str(temp)})
+    assert done.returncode == 0 and done.stdout.strip() == "2", done.stderr
+    assert sorted(p.name for p in temp.iterdir()) == []
+

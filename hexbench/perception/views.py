@@ -15,9 +15,8 @@ drawn from the same distribution for every class, so it carries no label informa
 from __future__ import annotations
 
 import colorsys
+import io
 import math
-import os
-import tempfile
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 
@@ -100,10 +99,11 @@ def _white_texture_file() -> str:
     """A 4x4 white PNG (PyBullet loads textures from files only)."""
     from PIL import Image
 
-    fd, path = tempfile.mkstemp(prefix="hexbench_white_", suffix=".png")
-    os.close(fd)
-    Image.fromarray(np.full((4, 4, 3), 255, np.uint8)).save(path)
-    return path
+    from hexbench.world.sim import process_file
+
+    png = io.BytesIO()
+    Image.fromarray(np.full((4, 4, 3), 255, np.uint8)).save(png, format="PNG")
+    return process_file("hexbench_white_", ".png", png.getvalue(), "a terrain texture")
 
 
 def paint_terrain(sim, rgb: tuple[float, float, float]) -> None:

@@ -8,6 +8,8 @@ max_speed * dt per control step towards the requested angle).
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import os
 import tempfile
 from dataclasses import dataclass
@@ -89,21 +91,35 @@ class RobotState:
         return np.array(lin)
 
 
-@lru_cache(maxsize=4)
-def _urdf_file(spec: JetHexaSpec) -> str:
-    """Write the robot URDF once per process and spec (PyBullet loads URDF from files only); a
-    temporary folder that cannot take it (full, read-only) is one OutputError line."""
+def process_file(prefix: str, suffix: str, content: bytes, what: str) -> str:
+    """`content` in a file of the temporary folder for the life of this process (PyBullet loads
+    URDFs and textures from files only), removed when the process that made it exits (not by its
+    forks); a temporary folder that cannot take it (full, read-only) is one OutputError line
+    naming `what`."""
     try:
-        fd, path = tempfile.mkstemp(prefix="jethexa_", suffix=".urdf")
+        fd, path = tempfile.mkstemp(prefix=prefix, suffix=suffix)
     except OSError as e:
-        raise OutputError(f"{tempfile.gettempdir()}: cannot write the robot's URDF there ({os_reason(e)})") from None
+        raise OutputError(f"{tempfile.gettempdir()}: cannot write {what} there ({os_reason(e)})") from None
     try:
-        with os.fdopen(fd, "w") as f:
-            f.write(urdf_text(spec))
+        with os.fdopen(fd, "wb") as f:
+            f.write(content)
     except OSError as e:
         os.unlink(path)
-        raise OutputError(f"{path}: cannot write the robot's URDF ({os_reason(e)})") from None
+        raise OutputError(f"{path}: cannot write {what} ({os_reason(e)})") from None
+    atexit.register(_remove_if_made_here, path, os.getpid())
     return path
+
+
+def _remove_if_made_here(path: str, maker_pid: int) -> None:
+    if os.getpid() == maker_pid:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+
+
+@lru_cache(maxsize=4)
+def _urdf_file(spec: JetHexaSpec) -> str:
+    """The robot URDF, written once per process and spec."""
+    return process_file("jethexa_", ".urdf", urdf_text(spec).encode(), "the robot's URDF")
 
 
 class Simulation:
