@@ -261,4 +261,3 @@ def test_the_files_pybullet_loads_go_when_the_process_that_wrote_them_exits(tmp_
                           env={**os.environ, "TMPDIR": str(temp)})
     assert done.returncode == 0 and done.stdout.strip() == "2", done.stderr
     assert sorted(p.name for p in temp.iterdir()) == []
-
