@@ -28,6 +28,23 @@ def repo() -> Path:
     return REPO
 
 
+@pytest.fixture
+def small_disk():
+    """`mount(folder, size_bytes)`: the bubblewrap command prefix that runs a command with a
+    `size_bytes` tmpfs on `folder` and everything else as it is (a disk that fills for real);
+    skips the test where bubblewrap cannot mount one."""
+    import subprocess
+
+    def mount(folder: Path, size_bytes: int) -> list[str]:
+        folder.mkdir(parents=True, exist_ok=True)
+        prefix = ["bwrap", "--dev-bind", "/", "/", "--size", str(size_bytes), "--tmpfs", str(folder), "--"]
+        if shutil.which("bwrap") is None or subprocess.run([*prefix, "true"], capture_output=True).returncode != 0:
+            pytest.skip("bubblewrap cannot mount a tmpfs here")
+        return prefix
+
+    return mount
+
+
 TINY_PROTOCOL = """# A one-level-per-terrain protocol for fast end-to-end tests (same rules as v1, short episodes).
 protocol = "v1"
 episodes_per_level = 2

@@ -9,7 +9,6 @@ import sys
 import textwrap
 import time
 from pathlib import Path
-from types import SimpleNamespace
 
 import jsonschema
 import numpy as np
@@ -176,6 +175,8 @@ def test_rrd_passes_rerun_verify_and_carries_the_episode_id(episode):
     assert '"rough-6cm-00"' in printed  # recording id
     for entity in ("/world/terrain", "/world/robot/links", "/world/robot/feet", "/plots/reward"):
         assert entity in printed
+    # the viewer opens it with hexbench's layout (3D view beside the plots), not one it guesses
+    assert "/viewport" in printed and "make_default: true" in printed
 
 
 def test_rerun_robot_poses_match_pybullet_links():
@@ -227,52 +228,36 @@ def test_abort_mid_episode_leaves_no_file(tmp_path):
     assert list(tmp_path.iterdir()) == []
 
 
-def test_failure_while_writing_leaves_no_partial_file(tmp_path, monkeypatch):
-    import hexbench.recording.recorder as recorder
+@pytest.mark.parametrize("room_for", ["nothing", "the MCAP"])
+def test_a_disk_that_fills_is_one_output_error_and_leaves_no_file(tmp_path, episode, small_disk, room_for):
+    """On a disk (a tmpfs) with no room, or room for the episode's MCAP but not its .rrd, the
+    recorder raises one OutputError naming the file it could not write, returns (Rerun's own
+    file writer never did when it started a file on a full disk), and leaves nothing behind."""
+    import subprocess
 
-    def broken_rrd(path, *args, **kwargs):
-        Path(path).write_bytes(b"half a file")
-        raise OSError("disk full")
-
-    monkeypatch.setattr(recorder, "write_episode_rrd", broken_rrd)
-    with pytest.raises(OutputError, match=r"-00\.rrd: cannot be written \(disk full\)$"):
-        record_short_episode(tmp_path, steps=5)
-    assert list(tmp_path.iterdir()) == []
-
-
-def test_a_failed_rerun_write_is_one_output_error_and_leaves_no_partial_file(tmp_path, monkeypatch):
-    """Rerun's writer says only "File-writer thread shut down prematurely" when the disk fills
-    under it: the line names the file and, from the space left, the full disk."""
-    import shutil
-
-    import hexbench.recording.recorder as recorder
-
-    def full_disk_rrd(path, *args, **kwargs):
-        Path(path).write_bytes(b"half a file")
-        monkeypatch.setattr(shutil, "disk_usage", lambda folder: SimpleNamespace(total=10 << 30, used=10 << 30, free=0))
-        raise RuntimeError("File-writer thread shut down prematurely")
-
-    monkeypatch.setattr(recorder, "write_episode_rrd", full_disk_rrd)
-    with pytest.raises(OutputError, match=r"\.rrd: cannot be written \(no space left on device\)$"):
-        record_short_episode(tmp_path, steps=5)
-    assert list(tmp_path.iterdir()) == []
-
-
-def test_no_rerun_write_starts_on_a_disk_without_room_for_it(tmp_path, monkeypatch):
-    """Rerun's writer never returns when it starts a file on a full disk: it is not called then."""
-    import shutil
-
-    import hexbench.recording.recorder as recorder
-
-    def must_not_run(*args, **kwargs):
-        raise AssertionError("the .rrd writer was called on a full disk")
-
-    monkeypatch.setattr(recorder, "write_episode_rrd", must_not_run)
-    almost_full = SimpleNamespace(total=10 << 30, used=(10 << 30) - 4096, free=4096)
-    monkeypatch.setattr(shutil, "disk_usage", lambda folder: almost_full)
-    with pytest.raises(OutputError, match=r"\.rrd: cannot be written \(no space left on device\)$"):
-        record_short_episode(tmp_path, steps=5)
-    assert list(tmp_path.iterdir()) == []
+    _, files = episode
+    page_bytes = 4096
+    mcap_pages = -(-(episode[0] / files["mcap_path"]).stat().st_size // page_bytes)
+    size_bytes = page_bytes if room_for == "nothing" else (mcap_pages + 1) * page_bytes
+    disk = tmp_path / "disk"
+    prefix = small_disk(disk, size_bytes)
+    script = textwrap.dedent(f"""
+        import sys
+        from pathlib import Path
+        sys.path.insert(0, {str(REPO / 'tests')!r})
+        from test_recording import record_short_episode
+        from hexbench.errors import OutputError
+        try:
+            record_short_episode(Path({str(disk)!r}))
+        except OutputError as e:
+            print("error:", e)
+        print("left:", sorted(p.name for p in Path({str(disk)!r}).iterdir()))
+    """)
+    shown = subprocess.run([*prefix, sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
+                           timeout=120)
+    kind = "mcap" if room_for == "nothing" else "rrd"
+    assert shown.stdout.splitlines() == [
+        f"error: {disk}/rough-6cm-00.{kind}: cannot be written (no space left on device)", "left: []"], shown.stderr
 
 
 def test_killed_worker_leaves_finished_episodes_readable_and_no_partial_file(tmp_path):
@@ -619,3 +604,24 @@ def test_rrd_can_be_built_from_the_mcap(tmp_path):
                              capture_output=True, text=True, timeout=60, env={**os.environ, "RERUN_ANALYTICS": "0"}).stdout
     assert '"stairs-4cm-00"' in printed and "/world/robot/links" in printed and "/world/terrain" in printed
     assert sorted(p.name for p in tmp_path.iterdir()) == ["stairs-4cm-00.mcap", "stairs-4cm-00.rrd"]
+
+
+def test_an_rrd_built_from_the_mcap_onto_a_full_disk_is_one_output_error(episode, tmp_path, small_disk):
+    """The .rrd built on demand for an MCAP-only episode, onto a disk (a tmpfs) with no room for it."""
+    out, files = episode
+    disk = tmp_path / "disk"
+    prefix = small_disk(disk, 4096)
+    script = textwrap.dedent(f"""
+        from pathlib import Path
+        from hexbench.errors import OutputError
+        from hexbench.replay.rrd_from_mcap import rrd_from_mcap
+        try:
+            rrd_from_mcap({str(out / files["mcap_path"])!r}, {str(disk / "episode.rrd")!r})
+        except OutputError as e:
+            print("error:", e)
+        print("left:", sorted(p.name for p in Path({str(disk)!r}).iterdir()))
+    """)
+    shown = subprocess.run([*prefix, sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
+                           timeout=120)
+    assert shown.stdout.splitlines() == [f"error: {disk}/episode.rrd: cannot be written (no space left on device)",
+                                         "left: []"], shown.stderr

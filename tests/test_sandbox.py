@@ -301,19 +301,6 @@ def test_unwritable_outputs_are_one_line_and_leave_nothing(tmp_path, make_out):
     assert "Traceback" not in res.output
 
 
-def _small_disk(folder: Path, size_bytes: int) -> list[str] | None:
-    """The bwrap command prefix that runs a command with a `size_bytes` tmpfs mounted on `folder`
-    and everything else as it is, or None where bubblewrap cannot make one."""
-    import shutil
-    import subprocess
-
-    folder.mkdir(parents=True, exist_ok=True)
-    prefix = ["bwrap", "--dev-bind", "/", "/", "--size", str(size_bytes), "--tmpfs", str(folder), "--"]
-    if shutil.which("bwrap") is None or subprocess.run([*prefix, "true"], capture_output=True).returncode != 0:
-        return None
-    return prefix
-
-
 NOISY = """
 import numpy as np
 
@@ -332,17 +319,15 @@ def make_controller(task):
 
 
 @pytest.mark.parametrize("what_fills_it", ["action logs", "recording"])
-def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, what_fills_it):
+def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, what_fills_it, small_disk):
     """A run onto a small file system (a tmpfs): the write that finds the disk full, whichever it
-    is (an episode's action log in the evaluator; its MCAP or .rrd in a pool worker, where Rerun's
-    writer would never return on a full disk), is one line, and the run leaves no file."""
+    is (an episode's action log in the evaluator; its MCAP or .rrd in a pool worker), is one line,
+    and the run leaves no file."""
     import subprocess
 
     disk = tmp_path / "disk"
     size_bytes = 64 << 10 if what_fills_it == "action logs" else 1 << 20
-    prefix = _small_disk(disk, size_bytes)
-    if prefix is None:
-        pytest.skip("bubblewrap cannot mount a tmpfs here")
+    prefix = small_disk(disk, size_bytes)
     if what_fills_it == "action logs":
         (tmp_path / "noisy.py").write_text(NOISY)
         args = [str(tmp_path / "noisy.py"), "--workers", "1", "--no-record"]
@@ -360,13 +345,11 @@ def test_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, what_fills_it):
     assert "Traceback" not in shown.stderr
 
 
-def test_a_full_temporary_folder_is_one_line_and_leaves_nothing(tmp_path):
+def test_a_full_temporary_folder_is_one_line_and_leaves_nothing(tmp_path, small_disk):
     """The evaluator writes the robot's URDF to the temporary folder (PyBullet loads files only)."""
     import subprocess
 
-    prefix = _small_disk(Path(tempfile.gettempdir()), 4096)
-    if prefix is None:
-        pytest.skip("bubblewrap cannot mount a tmpfs here")
+    prefix = small_disk(Path(tempfile.gettempdir()), 4096)
     check = f"{sys.executable} -m hexbench check {CPG} --steps 3 --isolation process"
     shown = subprocess.run([*prefix, "sh", "-c", f"{check}; echo rc=$?; find {tempfile.gettempdir()} -mindepth 1"],
                            cwd=REPO, capture_output=True, text=True, timeout=120)

@@ -11,45 +11,22 @@ is one OutputError line naming the file.
 
 from __future__ import annotations
 
-import errno
 import io
 import os
 import re
-import shutil
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
 
-from hexbench.artifacts.files import make_folder, sha256_bytes, sha256_file
+from hexbench.artifacts.files import make_folder, sha256_bytes
 from hexbench.errors import OutputError, os_reason
 from hexbench.recording.capture import EpisodeCapture
 from hexbench.recording.kinematics import joint_frames
 from hexbench.recording.mcap_episode import McapPrecision, write_episode_mcap
-from hexbench.recording.rerun_episode import RerunSettings, write_episode_rrd
+from hexbench.recording.rerun_episode import RerunSettings, episode_rrd_bytes
 from hexbench.recording.terrain_mesh import terrain_mesh
 
 _SAFE_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
-FULL_DISK_BYTES = 1 << 20  # a folder with less free space than this [bytes] is taken to be on a full disk
-
-
-def _check_room_for_rrd(folder: Path, mcap_bytes: int) -> None:
-    """OSError (ENOSPC) unless `folder` has room for an episode's .rrd: twice its MCAP's size (the two
-    are about as large) plus FULL_DISK_BYTES. Rerun's file writer never returns when it starts a
-    file on a full disk, and fails without saying why when the disk fills during its write
-    (rerun-sdk 0.41), so the space is checked before it is called."""
-    if shutil.disk_usage(folder).free < 2 * mcap_bytes + FULL_DISK_BYTES:
-        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
-
-
-def _rrd_write_failure(folder: Path, error: RuntimeError) -> OSError:
-    """Rerun's file writer reports a failed write as a RuntimeError without its cause ("File-writer
-    thread shut down prematurely", rerun-sdk 0.41): a full disk is told apart by the space left."""
-    try:
-        full = shutil.disk_usage(folder).free < FULL_DISK_BYTES
-    except OSError:
-        full = False
-    said = " ".join(str(error).split())[:200]
-    return OSError(errno.ENOSPC if full else errno.EIO, f"Rerun's file writer failed: {said}")
 
 
 @dataclass(frozen=True)
@@ -139,16 +116,12 @@ class EpisodeRecorder:
             files = {"mcap_path": self.mcap_path.name, "mcap_sha256": sha256_bytes(mcap_bytes)}
             if self.config.write_rrd:
                 writing = self.rrd_path
+                rrd_bytes = episode_rrd_bytes(ep, recording_id=self.episode_id, urdf=st["urdf"], joints=st["joints"],
+                                              mesh=st["mesh"], goal_x_m=st["goal_distance_m"], settings=self.config.rerun)
                 tmp_rrd = self._tmp(self.rrd_path)
                 self._tmp_paths.append(tmp_rrd)
-                _check_room_for_rrd(self.out_dir, len(mcap_bytes))
-                try:
-                    write_episode_rrd(tmp_rrd, ep, recording_id=self.episode_id, urdf=st["urdf"], joints=st["joints"],
-                                      mesh=st["mesh"], goal_x_m=st["goal_distance_m"], settings=self.config.rerun)
-                except RuntimeError as e:
-                    raise _rrd_write_failure(self.out_dir, e) from None
-                files.update({"rrd_path": self.rrd_path.name,
-                              "rrd_sha256": sha256_file(tmp_rrd)})
+                tmp_rrd.write_bytes(rrd_bytes)
+                files.update({"rrd_path": self.rrd_path.name, "rrd_sha256": sha256_bytes(rrd_bytes)})
                 os.replace(tmp_rrd, self.rrd_path)
             os.replace(tmp_mcap, self.mcap_path)
             self._tmp_paths.clear()

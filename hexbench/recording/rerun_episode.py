@@ -144,21 +144,28 @@ def series_from_episode(ep: EpisodeArrays, every_n_steps: int) -> RerunSeries:
         lateral_m=ep.lateral_m[k], plot_base_pos_m=ep.base_pos_m[plot], plot_base_quat_xyzw=ep.base_quat_xyzw[plot])
 
 
-def write_episode_rrd(path: Path, ep: EpisodeArrays, *, recording_id: str, urdf: str, joints: list[JointFrame],
+def episode_rrd_bytes(ep: EpisodeArrays, *, recording_id: str, urdf: str, joints: list[JointFrame],
                       mesh: tuple[np.ndarray, np.ndarray], goal_x_m: float,
-                      settings: RerunSettings = RerunSettings()) -> None:
-    """Write the episode's .rrd to `path` (the caller renames it into place)."""
-    write_series_rrd(path, series_from_episode(ep, settings.every_n_steps), recording_id=recording_id, urdf=urdf,
-                     joints=joints, mesh=mesh, goal_x_m=goal_x_m)
+                      settings: RerunSettings = RerunSettings()) -> bytes:
+    """The episode's .rrd file, whole, in memory (the caller writes it)."""
+    return series_rrd_bytes(series_from_episode(ep, settings.every_n_steps), recording_id=recording_id, urdf=urdf,
+                            joints=joints, mesh=mesh, goal_x_m=goal_x_m)
 
 
-def write_series_rrd(path: Path, se: RerunSeries, *, recording_id: str, urdf: str, joints: list[JointFrame],
-                     mesh: tuple[np.ndarray, np.ndarray], goal_x_m: float) -> None:
+def series_rrd_bytes(se: RerunSeries, *, recording_id: str, urdf: str, joints: list[JointFrame],
+                     mesh: tuple[np.ndarray, np.ndarray], goal_x_m: float) -> bytes:
+    """A whole .rrd file in memory: the default blueprint, then the recording, then Rerun's footer.
+
+    Rerun encodes into memory and the caller writes the bytes with Python's own file calls: Rerun's
+    file writer (rerun-sdk 0.41) never returns when it starts a file on a full disk and reports a
+    disk that fills under it only as "File-writer thread shut down prematurely", where a write of
+    ours fails with the operating system's reason (ENOSPC, EROFS, ...)."""
     import rerun as rr
     import rerun_bindings
 
     rec = rr.RecordingStream(APPLICATION_ID, recording_id=recording_id, send_properties=False)
-    blueprint_stream = _save_with_blueprint(rec, path)
+    stream = rr.binary_stream(recording=rec)
+    blueprint_stream = _send_default_blueprint(rec)
     try:
         rec.send_recording_name(recording_id)
         times = [rr.TimeColumn("sim_time", duration=se.time_s)]
@@ -201,24 +208,24 @@ def write_series_rrd(path: Path, se: RerunSeries, *, recording_id: str, urdf: st
         roll, pitch = _rpy_deg(se.plot_base_quat_xyzw)
         rec.send_columns("/plots/attitude_deg", step_times,
                          rr.Scalars.columns(scalars=np.stack([roll, pitch], axis=1)).partition([2] * p))
-        rec.flush()
+        rrd = stream.read(flush=True)
     finally:
         rec.disconnect()
         if blueprint_stream is not None:
             blueprint_stream.disconnect()
-        # Drop both streams so their writer threads end (else they pile up, four per episode, in a worker).
-        del rec, blueprint_stream
+        # Drop both streams so their threads end (else they pile up, episode after episode, in a worker).
+        del rec, stream, blueprint_stream
         rerun_bindings.flush_and_cleanup_orphaned_recordings()
+    if not rrd:
+        raise RuntimeError("Rerun returned no bytes for the recording")
+    return rrd
 
 
-def _save_with_blueprint(rec, path: Path):
-    """`rec.save(path, default_blueprint=blueprint())`, keeping hold of the blueprint's stream.
-
-    The public call builds the blueprint in an in-memory stream it never releases (two threads
-    leak per call, measured with rerun-sdk 0.41), so it is done here step by step with the same
-    calls `rerun.sinks.save` makes, and the caller disconnects the returned stream. Falls back to
-    the public call if those internals change.
-    """
+def _send_default_blueprint(rec):
+    """Send `blueprint()` into `rec` as the default blueprint (what `save(default_blueprint=...)` writes
+    ahead of a file), and return the blueprint's own stream for the caller to disconnect: the public
+    `send_blueprint` builds it in an in-memory stream it never releases (two threads leak per call,
+    measured with rerun-sdk 0.41), so this makes the same calls step by step."""
     import rerun as rr
 
     try:
@@ -228,11 +235,11 @@ def _save_with_blueprint(rec, path: Path):
             application_id=APPLICATION_ID, make_default=False, make_thread_default=False, default_enabled=True))
         bp_stream.set_time("blueprint", sequence=0)
         blueprint().to_blueprint()._log_to_stream(bp_stream)
-        storage = bp_stream.memory_recording().storage
-        bindings.save(path=str(path), default_blueprint=storage, recording=rec.to_native(), write_footer=True)
+        bindings.send_blueprint(bp_stream.memory_recording().storage, make_active=False, make_default=True,
+                                recording=rec.to_native())
         return bp_stream
-    except (AttributeError, TypeError):
-        rec.save(str(path), default_blueprint=blueprint())
+    except (AttributeError, TypeError):  # those internals changed: the public call
+        rec.send_blueprint(blueprint(), make_active=False, make_default=True)
         return None
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hexbench.errors import OutputError, os_reason
 from hexbench.recording.reader import EpisodeFileError, iter_topic, open_episode_file, read_episode
 
 
@@ -30,10 +31,10 @@ def _attachment(path: Path, name: str) -> bytes:
 
 def rrd_from_mcap(mcap_path: str | Path, rrd_path: str | Path) -> Path:
     """Write `rrd_path` (temporary name, then rename) from an episode's MCAP file; return it.
-    An unreadable or incomplete episode file is one EpisodeFileError."""
+    An unreadable or incomplete episode file is one EpisodeFileError, a failed write one OutputError."""
     from google.protobuf.message import DecodeError
 
-    from hexbench.recording.rerun_episode import write_series_rrd
+    from hexbench.recording.rerun_episode import series_rrd_bytes
 
     mcap_path, rrd_path = Path(mcap_path), Path(rrd_path)
     log = read_episode(mcap_path)
@@ -47,10 +48,14 @@ def rrd_from_mcap(mcap_path: str | Path, rrd_path: str | Path) -> Path:
     except ValueError:
         raise EpisodeFileError(f"{mcap_path}: goal_distance_m {log.episode['goal_distance_m']!r} "
                                f"is not a number") from None
+    rrd_bytes = series_rrd_bytes(series, recording_id=episode_id, urdf=urdf, joints=joints, mesh=mesh,
+                                 goal_x_m=goal_x_m)
     tmp = rrd_path.with_name(f".{rrd_path.name}.{os.getpid()}.tmp")
     try:
-        write_series_rrd(tmp, series, recording_id=episode_id, urdf=urdf, joints=joints, mesh=mesh, goal_x_m=goal_x_m)
+        tmp.write_bytes(rrd_bytes)
         os.replace(tmp, rrd_path)
+    except OSError as e:
+        raise OutputError(f"{rrd_path}: cannot be written ({os_reason(e)})") from None
     finally:
         tmp.unlink(missing_ok=True)
     return rrd_path
