@@ -18,6 +18,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from importlib.util import find_spec
 from pathlib import Path
@@ -62,6 +63,39 @@ def test_an_unreachable_cluster_is_one_line_and_exit_2(tmp_path):
     lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and "cannot reach the Ray cluster at 127.0.0.1:" in lines[0], lines
     assert not (tmp_path / "x").exists()
+
+
+def test_a_ray_worker_on_a_node_with_a_full_temporary_folder_is_one_line(tmp_path, small_disk):
+    """A Ray worker's first task makes its scratch folder in the node's temporary folder: on a disk
+    (a tmpfs) that has filled, that is one error naming the folder and the node, and no worker
+    folder is left there. The worker's set-up runs in a plain process here: no cluster is needed."""
+    disk = tmp_path / "disk"
+    prefix = small_disk(disk, 64 << 10)
+    script = textwrap.dedent(f"""
+        import os
+        from pathlib import Path
+        from hexbench.errors import HexbenchError
+        from hexbench.evaluation import engines
+        import tempfile
+        tempfile.gettempdir()  # found while the disk had room (Python passes over a full one)
+        try:
+            with open({str(disk / "filler")!r}, "wb") as f:
+                f.write(bytes(1 << 20))
+        except OSError:
+            pass
+        try:
+            engines._worker_setup()
+        except HexbenchError as e:
+            print("error:", e)
+        root = Path({str(disk)!r}) / f"hexbench-ray-{{os.getuid()}}"
+        print("worker folders left:", sorted(p.name for p in root.iterdir() if p.name != ".lock"))
+    """)
+    shown = subprocess.run([*prefix, sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
+                           timeout=120, env={**os.environ, "TMPDIR": str(disk)})
+    lines = shown.stdout.splitlines()
+    assert lines[0] == (f"error: {disk}: cannot make a Ray worker's scratch folder on node {socket.gethostname()} "
+                        "(no space left on device)"), shown.stdout + shown.stderr
+    assert lines[1:] == ["worker folders left: []"]
 
 
 # ---------------------------------------------------------------------------------- the cluster

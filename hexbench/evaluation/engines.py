@@ -35,7 +35,7 @@ from multiprocessing import get_context
 from pathlib import Path
 
 from hexbench.artifacts.files import sha256_bytes, write_bytes_atomic
-from hexbench.errors import HexbenchError
+from hexbench.errors import HexbenchError, OutputError, os_reason
 from hexbench.evaluation import sandbox
 from hexbench.evaluation.episode import run_episode
 from hexbench.evaluation.workers import exit_when_orphaned, pin_to_core, worker_init
@@ -336,7 +336,11 @@ def ray_episode(job, cwd: str, env: dict) -> tuple[dict, dict[str, bytes]]:
     if _WORKER.get("run") != run:  # a Ray worker outlives a run (it serves its driver's job): as a pool
         sandbox.close_all()       # worker's do, the previous run's controller processes end with it
         _WORKER["run"] = run
-    scratch = Path(tempfile.mkdtemp(prefix=f"{job.episode_id}-", dir=scratch_root))
+    try:
+        scratch = Path(tempfile.mkdtemp(prefix=f"{job.episode_id}-", dir=scratch_root))
+    except OSError as e:
+        raise OutputError(f"{scratch_root}: cannot make episode {job.episode_id}'s folder on node "
+                          f"{socket.gethostname()} ({os_reason(e)})") from None
     local = replace(job, log_dir=str(scratch) if job.log_dir is not None else None,
                     record_dir=str(scratch) if job.record_dir is not None else None,
                     hidden=(*job.hidden, str(scratch_root)))
@@ -361,7 +365,11 @@ def _worker_setup() -> str:
     if "scratch" in _WORKER:
         return _WORKER["scratch"]
     use_controller_math()
-    scratch, core = _claim_worker_folder()
+    try:
+        scratch, core = _claim_worker_folder()
+    except OSError as e:
+        raise OutputError(f"{tempfile.gettempdir()}: cannot make a Ray worker's scratch folder on node "
+                          f"{socket.gethostname()} ({os_reason(e)})") from None
     atexit.register(shutil.rmtree, scratch, True)
     atexit.register(sandbox.close_all)
     threading.Thread(target=exit_when_orphaned, args=(os.getppid(),), daemon=True, name="orphan-watchdog").start()
@@ -404,7 +412,11 @@ def _claim_worker_folder() -> tuple[str, int | None]:
         core = min(allowed, key=lambda c: (held[c], c)) if len(allowed) > 1 else None
         mine = root / str(os.getpid())
         mine.mkdir(mode=0o700, exist_ok=True)
-        (mine / "core").write_text("" if core is None else str(core))
+        try:
+            (mine / "core").write_text("" if core is None else str(core))
+        except OSError:
+            shutil.rmtree(mine, ignore_errors=True)
+            raise
     return str(mine), core
 
 
