@@ -163,6 +163,66 @@ def test_the_shipped_record_reproduces(tmp_path):
     shutil.rmtree(out)
 
 
+def _forgeries(run: Path, tmp_path: Path):
+    """(what, forged copy of `run`, what its one line must say): a self-consistent forged row, a
+    flipped action log, a missing one, and two rows' logs swapped with their hashes."""
+    from hexbench.artifacts.records import episodes_digest
+    from hexbench.suite.scoring import summarize_levels, summarize_terrains
+
+    def copy(name: str, edit) -> Path:
+        dst = tmp_path / name
+        shutil.copytree(run, dst)
+        record = json.loads((dst / "result.json").read_text())
+        edit(dst, record)
+        units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
+        headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
+        record["levels"] = summarize_levels(record["episodes"], units, headroom)
+        record["terrains"] = summarize_terrains(record["levels"])
+        record["episodes_digest"] = episodes_digest(record["episodes"])
+        (dst / "result.json").write_text(json.dumps(record))
+        return dst
+
+    def forged_row(dst, record):
+        record["episodes"][1]["progress_m"] += 0.5
+
+    def flipped_log(dst, record):
+        log = dst / "episodes" / record["episodes"][0]["action_log_path"]
+        data = bytearray(log.read_bytes())
+        data[-5] ^= 0x01
+        log.write_bytes(bytes(data))
+
+    def missing_log(dst, record):
+        (dst / "episodes" / record["episodes"][0]["action_log_path"]).unlink()
+
+    def swapped_logs(dst, record):
+        a, b = record["episodes"][0], record["episodes"][1]
+        a["action_log_path"], b["action_log_path"] = b["action_log_path"], a["action_log_path"]
+        a["action_log_sha256"], b["action_log_sha256"] = b["action_log_sha256"], a["action_log_sha256"]
+
+    yield "forged row", copy("row", forged_row), "progress_m: recorded"
+    yield "flipped log", copy("flipped", flipped_log), "sha256 differs"
+    yield "missing log", copy("missing", missing_log), "cannot be read"
+    yield "swapped logs", copy("swapped", swapped_logs), "belongs to another episode"
+
+
+@needs_bwrap
+def test_with_a_rerun_the_episodes_are_replayed_once_and_every_forgery_is_still_named(tiny_protocol, tmp_path):
+    """With --rerun the replay leaves the physics to the re-run (its evaluator plays the recorded
+    actions and must find every row as recorded): an honest run passes, saying so, and each
+    forgery a replay catches is caught, in one line."""
+    tasks = [load_suite("v1").task("stairs", 2), load_suite("v1").task("rough", 3)]
+    run = tmp_path / "run"
+    assert evaluate(CPG, tasks, run, workers=1, record=False, progress=False).error is None
+    honest = verify(str(run), "--rerun")
+    assert honest.exit_code == 0, honest.output
+    assert "the action logs of all 4 episodes are intact (not replayed: the re-run replays them)" in honest.output
+    assert "chose every action of all 4 episodes exactly as recorded" in honest.output
+    for what, forged, says in _forgeries(run, tmp_path):
+        res = verify(str(forged), "--rerun")
+        errors = [line for line in res.output.splitlines() if line.startswith("error:")]
+        assert res.exit_code == 1 and len(errors) == 1 and says in errors[0], (what, res.output)
+
+
 @needs_bwrap
 def test_leaderboard_admission_can_rerun_the_controller(tiny_protocol, tmp_path):
     """`hexbench leaderboard add RUN --rerun`: the admission says the controller was re-run; a record
@@ -176,6 +236,7 @@ def test_leaderboard_admission_can_rerun_the_controller(tiny_protocol, tmp_path)
     assert added.exit_code == 0, added.output
     admission = json.loads((board / "cpg.json").read_text())["admission"]
     assert admission["controller_rerun"] == {"episodes": 6, "isolation": "bubblewrap", "with_run_secret": True}
+    assert admission["episodes_replayed"] == 6  # by the re-run, which played the recorded actions
     assert "| sandboxed + replayed + re-run |" in (board / "README.md").read_text()
     replayed_only = CliRunner().invoke(app, ["leaderboard", "add", str(run), "--dir", str(board), "--workers", "1",
                                              "--replace"])

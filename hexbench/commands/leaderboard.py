@@ -56,9 +56,9 @@ def register(app: typer.Typer) -> None:
         address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
         seed_run: Path = typer.Option(None, "--seed-run", help="admit the run as this seed-run folder's record "
                                       "(baselines/seeds/<method>-<terrain>-seed<S>/result-<terrain>.json) instead"),
-        rerun: bool = typer.Option(False, "--rerun", help="also play the replayed episodes again with the controller "
-                                   "the record names, sandboxed: every action must be the recorded one (the "
-                                   "admission says so)"),
+        rerun: bool = typer.Option(False, "--rerun", help="play the episodes with the controller the record names "
+                                   "instead, sandboxed: every action must be the recorded one and every row the "
+                                   "record's, which replays them (the admission says so)"),
         controller: str = typer.Option(None, "--controller", help="with --rerun: the controller file, where it is not "
                                        "at the path the record names (it must be the same file: sha256)"),
     ) -> None:

@@ -206,14 +206,16 @@ def register(app: typer.Typer) -> None:
         engine: str = typer.Option("local", "--engine", help="where replays run: local (processes on this machine) "
                                    "or ray (tasks on a Ray cluster; the action logs travel with them)"),
         address: str = typer.Option(None, "--address", help="with --engine ray: the cluster's address HOST:PORT"),
-        rerun: bool = typer.Option(False, "--rerun", help="then play the same episodes again with the controller the "
-                                   "record names, sandboxed, and check it chooses every recorded action"),
+        rerun: bool = typer.Option(False, "--rerun", help="play the episodes with the controller the record names "
+                                   "instead, sandboxed, and check it chooses every recorded action and every row "
+                                   "comes out as recorded (which replays them)"),
         controller: str = typer.Option(None, "--controller", help="with --rerun: the controller file, where it is not "
                                        "at the path the record names (it must be the same file: sha256)"),
     ) -> None:
         """Replay a run's episodes from their action logs alone (never the controller) and check every row,
         the summaries, the digest and the seeds; the first mismatch is named. With --rerun, the record's
-        controller then plays the same episodes in the sandbox, and every action must be the recorded one."""
+        controller plays the same episodes in the sandbox instead: every action must be the recorded one
+        and every row the record's, so the recorded actions are replayed once, by the re-run."""
 
         from hexbench.errors import HexbenchError
 
@@ -227,7 +229,7 @@ def register(app: typer.Typer) -> None:
                 seed_set = read_seed_key(seed_key) if seed_key else None
                 with engines.opened(engine, address) as replay_engine:
                     report = verify_run(p, sample=sample, workers=workers or replay_engine.default_workers(),
-                                        seed_set=seed_set, progress=True)
+                                        seed_set=seed_set, progress=True, replay=not rerun)
             except HexbenchError as e:
                 _fail(str(e), 2)
             if not report.ok:

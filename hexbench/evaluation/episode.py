@@ -119,11 +119,9 @@ def file_change(path: str | Path, started_sha256: str, max_bytes: int, what: str
             f"its episodes would come from two versions of it: run it again")
 
 
-def replay_row(task: TaskSpec, row: dict, log_dir: Path, max_steps: int | None = None) -> dict:
-    """Re-simulate an episode row from its action log alone; return the replayed row.
-
-    Raises ActionLogError (missing, corrupt, or sha256 differs from the row) or ReplayMismatch.
-    """
+def row_action_log(task: TaskSpec, row: dict, log_dir: Path) -> action_log.ActionLog:
+    """The action log an episode row names, read from `log_dir`: ActionLogError if the row names none,
+    or it is missing, corrupt, not the sha256 the row states, or another episode's."""
     where = str(log_dir / str(row.get("action_log_path", "?")))
     if not row.get("action_log_path") or not row.get("action_log_sha256"):
         raise action_log.ActionLogError(f"{task.name} episode {row.get('index')}: the row names no action log")
@@ -131,6 +129,16 @@ def replay_row(task: TaskSpec, row: dict, log_dir: Path, max_steps: int | None =
     if (log.terrain, float(log.level), log.index, log.seed) != (task.terrain, float(task.level), row["index"], row["seed"]):
         raise action_log.ActionLogError(f"{where}: the action log belongs to another episode "
                                         f"({log.terrain} {log.level:g} #{log.index}, seed {log.seed})")
+    return log
+
+
+def replay_row(task: TaskSpec, row: dict, log_dir: Path, max_steps: int | None = None) -> dict:
+    """Re-simulate an episode row from its action log alone; return the replayed row.
+
+    Raises ActionLogError (see `row_action_log`) or ReplayMismatch.
+    """
+    log = row_action_log(task, row, log_dir)
+    where = str(log_dir / str(row["action_log_path"]))
     return play(task, int(row["seed"]), LoggedActions(log, where), index=int(row["index"]), max_steps=max_steps,
                 where=where).row
 

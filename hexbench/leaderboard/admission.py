@@ -74,7 +74,10 @@ def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None 
     keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed"
     if keyed and (seed_set is None or seed_set.key is None):
         raise RecordError(f"{where}: has a keyed seed set; admission needs the key (--seed-key FILE) to check its seeds")
-    report = verify_run(run_dir, sample=sample, rng=rng, workers=workers, seed_set=seed_set, progress=progress)
+    # With a re-run, its evaluator plays every chosen episode and must find the recorded action log
+    # and row: that replays them, so the replay here checks all but the physics.
+    report = verify_run(run_dir, sample=sample, rng=rng, workers=workers, seed_set=seed_set, progress=progress,
+                        replay=rerun_controller is None)
     if not report.ok:
         raise RecordError(f"refused: {report.message}")
     admitted = {k: v for k, v in record.items() if k != "admission"}
@@ -86,6 +89,7 @@ def admit(record: dict, run_dir: Path | None, where: str, *, sample: int | None 
                                progress=progress)
         if not rerun.ok:
             raise RecordError(f"refused: {rerun.message}")
+        admitted["admission"]["episodes_replayed"] = rerun.episodes_rerun
         admitted["admission"]["controller_rerun"] = {"episodes": rerun.episodes_rerun, "isolation": rerun.isolation,
                                                      "with_run_secret": rerun.with_run_secret}
     return admitted

@@ -136,7 +136,8 @@ def rerun_episodes(run_dir: str | Path, record: dict, rows: list[dict], controll
     total = len(record["episodes"])
     what = f"{len(rows)} of {total} episodes" if len(rows) < total else "the episode" if total == 1 else f"all {total} episodes"
     return RerunReport(True, f"{run_dir}: {controller_file} (sha256 {sha[:12]}, its weights as recorded), re-run "
-                             f"under {mode} isolation {seeds}, chose every action of {what} exactly as recorded",
+                             f"under {mode} isolation {seeds}, chose every action of {what} exactly as recorded, and "
+                             f"every row came out as recorded",
                        len(results), mode, secret_hex is not None)
 
 
