@@ -93,8 +93,8 @@ def test_a_ray_worker_on_a_node_with_a_full_temporary_folder_is_one_line(tmp_pat
     shown = subprocess.run([*prefix, sys.executable, "-c", script], cwd=REPO, capture_output=True, text=True,
                            timeout=120, env={**os.environ, "TMPDIR": str(disk)})
     lines = shown.stdout.splitlines()
-    assert lines[0] == (f"error: {disk}: cannot make a Ray worker's scratch folder on node {socket.gethostname()} "
-                        "(no space left on device)"), shown.stdout + shown.stderr
+    assert lines[:1] == [f"error: {disk}: cannot make a Ray worker's scratch folder on node {socket.gethostname()} "
+                         "(no space left on device)"], shown.stdout + shown.stderr
     assert lines[1:] == ["worker folders left: []"]
 
 
