@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hexbench.artifacts.records import episodes_digest
 from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.tasks import load_suite
 
@@ -84,3 +85,13 @@ def mutated(record: dict, change) -> dict:
     out = copy.deepcopy(record)
     change(out)
     return out
+
+
+def resummarize(record: dict) -> None:
+    """Recompute a record's level and terrain summaries and its episodes digest from its rows, in
+    place: what a forger who edits rows does to keep the record self-consistent."""
+    units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
+    headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
+    record["levels"] = summarize_levels(record["episodes"], units, headroom)
+    record["terrains"] = summarize_terrains(record["levels"])
+    record["episodes_digest"] = episodes_digest(record["episodes"])

@@ -10,7 +10,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from leaderboard_records import PAPER_REFERENCE, demo_records, mutated, synthetic_record, write_board
+from leaderboard_records import PAPER_REFERENCE, demo_records, mutated, resummarize, synthetic_record, write_board
 from typer.testing import CliRunner
 
 from hexbench import leaderboard as lb
@@ -372,9 +372,7 @@ def test_hidden_seeds_rank_as_hidden_only_where_the_controller_could_not_read_th
 
 
 def test_add_refuses_a_forged_run_and_one_made_in_process(tmp_path, tiny_protocol):
-    from hexbench.artifacts.records import episodes_digest
     from hexbench.evaluation.evaluate import evaluate
-    from hexbench.suite.scoring import summarize_levels, summarize_terrains
     from hexbench.suite.tasks import load_suite
 
     tasks = list(load_suite("v1").tasks)
@@ -385,11 +383,7 @@ def test_add_refuses_a_forged_run_and_one_made_in_process(tmp_path, tiny_protoco
     record = json.loads((run / "result.json").read_text())
     # self-consistent forgery: a success flipped, summaries and digest recomputed from the rows
     record["episodes"][0].update(success=True, end_reason="success", time_to_goal_s=0.5)
-    units = {t.terrain: t.unit for t in tasks}
-    headroom = {(t.terrain, t.level): t.headroom for t in tasks}
-    record["levels"] = summarize_levels(record["episodes"], units, headroom)
-    record["terrains"] = summarize_terrains(record["levels"])
-    record["episodes_digest"] = episodes_digest(record["episodes"])
+    resummarize(record)
     (run / "result.json").write_text(json.dumps(record))
     with pytest.raises(lb.RecordError, match="success: recorded True, replayed False"):
         lb.add(run, board)
@@ -716,9 +710,7 @@ def test_a_record_of_paper_table_5_tasks_is_admitted_by_replay_into_its_own_fold
     courses/table5/ as <label>-<terrain>.json, shown with its tier on the courses page."""
     from conftest import TINY_PROTOCOL
 
-    from hexbench.artifacts.records import episodes_digest
     from hexbench.evaluation.evaluate import evaluate
-    from hexbench.suite.scoring import summarize_levels, summarize_terrains
 
     (tiny_protocol / "protocol_v1.toml").write_text(TINY_PROTOCOL.replace("levels = [6]", "levels = [6, 10]"))
     table5_task = load_suite("v1").task("slopes", 10)
@@ -743,10 +735,7 @@ def test_a_record_of_paper_table_5_tasks_is_admitted_by_replay_into_its_own_fold
     shutil.copytree(run, forged_run)
     record = json.loads((forged_run / "result.json").read_text())
     record["episodes"][0].update(success=True, end_reason="success", time_to_goal_s=0.5)
-    units, headroom = {"slopes": "deg"}, {("slopes", 10.0): False}
-    record["levels"] = summarize_levels(record["episodes"], units, headroom)
-    record["terrains"] = summarize_terrains(record["levels"])
-    record["episodes_digest"] = episodes_digest(record["episodes"])
+    resummarize(record)
     (forged_run / "result.json").write_text(json.dumps(record))
     with pytest.raises(lb.RecordError, match="refused: .*success: recorded"):
         lb.add(forged_run, board, replace=True, workers=1)

@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
+from leaderboard_records import resummarize
 from typer.testing import CliRunner
 
 from hexbench.cli import app
@@ -166,19 +167,12 @@ def test_the_shipped_record_reproduces(tmp_path):
 def _forgeries(run: Path, tmp_path: Path):
     """(what, forged copy of `run`, what its one line must say): a self-consistent forged row, a
     flipped action log, a missing one, and two rows' logs swapped with their hashes."""
-    from hexbench.artifacts.records import episodes_digest
-    from hexbench.suite.scoring import summarize_levels, summarize_terrains
-
     def copy(name: str, edit) -> Path:
         dst = tmp_path / name
         shutil.copytree(run, dst)
         record = json.loads((dst / "result.json").read_text())
         edit(dst, record)
-        units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
-        headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
-        record["levels"] = summarize_levels(record["episodes"], units, headroom)
-        record["terrains"] = summarize_terrains(record["levels"])
-        record["episodes_digest"] = episodes_digest(record["episodes"])
+        resummarize(record)
         (dst / "result.json").write_text(json.dumps(record))
         return dst
 

@@ -8,14 +8,14 @@ import time
 from pathlib import Path
 
 import pytest
+from leaderboard_records import resummarize
 from typer.testing import CliRunner
 
-from hexbench.artifacts.records import MAX_RECORD_BYTES, episodes_digest
+from hexbench.artifacts.records import MAX_RECORD_BYTES
 from hexbench.cli import app
 from hexbench.evaluation.evaluate import evaluate
 from hexbench.evaluation.isolation import landlock_abi
 from hexbench.replay.verify import verify_run
-from hexbench.suite.scoring import summarize_levels, summarize_terrains
 from hexbench.suite.seeds import SeedSet
 from hexbench.suite.tasks import load_suite
 
@@ -39,14 +39,6 @@ def _copy(run: Path, tmp_path: Path) -> Path:
     return dst
 
 
-def _resummarize(record: dict) -> None:
-    units = {lv["terrain"]: lv["unit"] for lv in record["levels"]}
-    headroom = {(lv["terrain"], lv["level"]): lv["headroom"] for lv in record["levels"]}
-    record["levels"] = summarize_levels(record["episodes"], units, headroom)
-    record["terrains"] = summarize_terrains(record["levels"])
-    record["episodes_digest"] = episodes_digest(record["episodes"])
-
-
 def test_an_honest_run_verifies_from_any_directory(run, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     res = CliRunner().invoke(app, ["verify", str(run), "--workers", "1"])
@@ -58,7 +50,7 @@ def test_a_self_consistent_forged_row_is_caught_by_replay(run, tmp_path):
     forged = _copy(run, tmp_path)
     record = json.loads((forged / "result.json").read_text())
     record["episodes"][1]["progress_m"] += 0.5
-    _resummarize(record)
+    resummarize(record)
     (forged / "result.json").write_text(json.dumps(record))
     report = verify_run(forged)
     assert not report.ok and "progress_m: recorded" in report.message and "episode 1" in report.message
@@ -91,7 +83,7 @@ def test_a_replaced_log_with_its_hash_updated_is_caught(run, tmp_path):
     a, b = record["episodes"][0], record["episodes"][1]
     a["action_log_path"], b["action_log_path"] = b["action_log_path"], a["action_log_path"]
     a["action_log_sha256"], b["action_log_sha256"] = b["action_log_sha256"], a["action_log_sha256"]
-    _resummarize(record)
+    resummarize(record)
     (forged / "result.json").write_text(json.dumps(record))
     assert "belongs to another episode" in verify_run(forged).message
 
@@ -288,7 +280,7 @@ def test_rows_that_are_not_one_runs_episodes_are_one_line(run, tmp_path, edit, w
     record = json.loads((forged / "result.json").read_text())
     edit(record)
     try:
-        _resummarize(record)
+        resummarize(record)
     except (KeyError, ValueError):  # no summary can be made of it: the digest stays as it was
         pass
     (forged / "result.json").write_text(json.dumps(record))

@@ -265,12 +265,12 @@ def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random
         chosen = [rows[i] for i in sorted(rng.choice(total, size=sample, replace=False))]
     keyed = record["provenance"].get("seed_set", {}).get("kind") == "keyed" and (seed_set is None or seed_set.key is None)
     note = " (keyed seed set: seeds not checked without --seed-key)" if keyed else ""
+    what = f"{len(chosen)} of {total}" if len(chosen) < total else f"all {total}"
     if not replay:
         for row in chosen:
             problem = _check_log_one(record["protocol"], row, run_dir / "episodes")
             if problem:
                 return VerifyReport(False, f"{run_dir}: {problem}", 0, total)
-        what = f"{len(chosen)} of {total}" if len(chosen) < total else f"all {total}"
         return VerifyReport(True, f"{run_dir}: summaries and digest match, and the action logs of {what} episodes "
                                   f"are intact{note} (not replayed: the re-run replays them)", 0, total,
                             tuple(chosen))
@@ -286,6 +286,5 @@ def verify_run(run_dir: str | Path, *, sample: int | None = None, rng: np.random
     failures = [r for r in results if r]
     if failures:
         return VerifyReport(False, f"{run_dir}: {failures[0]}", len(results), total)
-    what = f"{len(chosen)} of {total}" if len(chosen) < total else f"all {total}"
     return VerifyReport(True, f"{run_dir}: {what} episodes replay exactly from their action logs; summaries and "
                               f"digest match{note}", len(chosen), total, tuple(chosen))
