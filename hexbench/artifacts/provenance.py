@@ -17,13 +17,21 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]  # the hexbench package
 REPO_ROOT = PACKAGE_DIR.parent  # the checkout: tasks/, baselines/, datasets/
 
 
+# Tracked files no run, training or check reads: result records, the pages built from them, and
+# prose. A change to them alone leaves the commit clean (admitting one record rewrites the
+# leaderboard's files, and the next run in that checkout ran the committed code all the same).
+NOT_RUN_PATHSPECS: tuple[str, ...] = (":(exclude)leaderboard", ":(exclude)docs", ":(exclude)*.md")
+
+
 def git_commit(repo: Path | None = None) -> str:
-    """HEAD of `repo` (default: the hexbench checkout), `-dirty` when tracked files changed; "unknown" without git."""
+    """HEAD of `repo` (default: the hexbench checkout), `-dirty` when tracked files other than
+    NOT_RUN_PATHSPECS changed; "unknown" without git."""
     repo = repo or REPO_ROOT
     try:
         head = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
                               timeout=10).stdout.strip()
-        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no"],
+        dirty = subprocess.run(["git", "-C", str(repo), "status", "--porcelain", "--untracked-files=no",
+                                "--", ".", *NOT_RUN_PATHSPECS],
                                capture_output=True, text=True, timeout=10).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         return "unknown"
