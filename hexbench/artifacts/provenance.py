@@ -17,8 +17,8 @@ PACKAGE_DIR = Path(__file__).resolve().parents[1]  # the hexbench package
 REPO_ROOT = PACKAGE_DIR.parent  # the checkout: tasks/, baselines/, datasets/
 
 
-# Tracked files no run, training or check reads: result records, the pages built from them, and
-# prose. A change to them alone leaves the commit clean (admitting one record rewrites the
+# Tracked files that are data or prose, not code: result records, the pages built from them, and
+# the docs. A change to them alone leaves the commit clean (admitting one record rewrites the
 # leaderboard's files, and the next run in that checkout ran the committed code all the same).
 NOT_RUN_PATHSPECS: tuple[str, ...] = (":(exclude)leaderboard", ":(exclude)docs", ":(exclude)*.md")
 
