@@ -7,6 +7,8 @@
     #                                                             and each process's CPU, switches and faults per step
     python bench/sandbox_overhead.py --per-step --cores 2       # the same on two cores at once, as `hexbench run` loads them
     python bench/sandbox_overhead.py --act-loop                 # act() of the controller in one process, caches warm
+    python bench/sandbox_overhead.py --at-once --rounds 2       # the full protocol sandboxed and in-process at the
+    #                                                             same time, one core each, swapped every round
 
 The same episodes are evaluated with the controller sandboxed (the default isolation: bubblewrap,
 else process) and in-process (`--isolation none`), alternating A/B/B/A in one run, after an untimed
@@ -19,6 +21,13 @@ process that imports the controller's libraries) is a part of the ratio that a f
 of 860 episodes spreads thin; `--per-step` measures the steady state alone.
 Both runs must give identical episode rows (the sandbox changes where the controller runs, never
 what it does). Then the action-log bytes per episode (always written) and per control step.
+`--at-once` is for VMs whose speed drifts between back-to-back runs by more than the effect: each
+round runs `hexbench run CONTROLLER --workers 1` twice at the same time, sandboxed on one core and
+`--isolation none` on the other (cores swapped in the next round), recording on, the full protocol
+(or `--episodes N` per level of every level); when one run ends, in-process episodes of rough 3 cm
+keep its core busy until the other ends, so neither finishes on a quieter machine. Both runs'
+episodes digests must be equal. The ratio is of the runs' own wall times (`wall_time_s`), per
+round and over all rounds.
 Also the evaluator <-> controller round trip for one act() call, with the two processes on one
 core (what `hexbench run` does) and free to run on different cores. Writes
 bench/out/sandbox_overhead.json.
@@ -30,7 +39,10 @@ import argparse
 import json
 import os
 import resource
+import shutil
 import statistics
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -93,7 +105,7 @@ def round_trip_us(isolation: str, pinned: bool, calls: int = 3000) -> float:
     return statistics.median(times) * 1e6
 
 
-class _StepTimer:
+class StepTimer:
     """Sums the wall time [s] of the parts of a control step it wraps, by name."""
 
     def __init__(self):
@@ -112,10 +124,10 @@ class _StepTimer:
         return timed
 
 
-class _TimedActor:
+class TimedActor:
     """Wraps an episode's controller and times its act() calls (the `timer`'s "act")."""
 
-    def __init__(self, ctrl, timer: _StepTimer):
+    def __init__(self, ctrl, timer: StepTimer):
         self.ctrl, self._act = ctrl, timer.wrap("act", ctrl.act)
         self.action_mode, self.camera = ctrl.action_mode, getattr(ctrl, "camera", None)
 
@@ -166,16 +178,16 @@ def per_step_us(controller: str, isolation: str, seeds: tuple[int, ...] = (1000,
     try:
         ctrl = sandbox.controller_for(controller, task, isolation)
         env = rollout.make_env(task, ctrl.action_mode)
-        timer = _StepTimer()
+        timer = StepTimer()
         rollout.check_action = timer.wrap("check", check_action)  # as the loop calls it
         env.step = timer.wrap("env_step", env.step)
         env.sim.step_physics = timer.wrap("physics", env.sim.step_physics)
-        rollout.play(task, seeds[0], _TimedActor(ctrl, timer), controller_seed=5, env=env)
+        rollout.play(task, seeds[0], TimedActor(ctrl, timer), controller_seed=5, env=env)
         out = []
         child = getattr(getattr(ctrl, "process", None), "proc", None)
         for seed in seeds:
             timer.sums.clear()
-            actor = _TimedActor(ctrl, timer)
+            actor = TimedActor(ctrl, timer)
             before = [_own_counters()] + ([process_tree_counters(child.pid)] if child else [])
             t0 = time.perf_counter()
             steps = rollout.play(task, seed, actor, controller_seed=5, env=env).row["steps"]
@@ -258,16 +270,102 @@ def report_per_step(controller: str, cores: int) -> None:
           f"ratio {sandboxed / in_process:.3f} ({cores} core{'s' if cores > 1 else ''} busy)")
 
 
+def _hexbench_run(core: int, argv: list[str], log) -> subprocess.Popen:
+    """`hexbench run ARGV` in a process of its own session, pinned to `core` (its workers and
+    controller processes inherit the pin)."""
+    return subprocess.Popen([sys.executable, "-m", "hexbench", "run", *argv], cwd=REPO, stdout=log,
+                            stderr=subprocess.STDOUT, start_new_session=True,
+                            preexec_fn=lambda: os.sched_setaffinity(0, {core}))
+
+
+def _stop(proc: subprocess.Popen) -> None:
+    if proc.poll() is None:
+        os.killpg(proc.pid, 9)
+    proc.wait()
+
+
+def at_once_round(controller: str, episodes: int | None, cores: dict[str, int], folder: Path) -> dict[str, dict]:
+    """One round of `--at-once`: the two isolations' runs at once, each on its core in `cores`;
+    (isolation -> its record's provenance and episodes digest)."""
+    limit = [] if episodes is None else ["--episodes", str(episodes)]
+    runs, logs = {}, {}
+    for isolation, core in cores.items():
+        logs[isolation] = open(folder / f"{isolation}.log", "w")
+        runs[isolation] = _hexbench_run(core, [controller, "--workers", "1", "--isolation", isolation, *limit,
+                                               "--out", str(folder / isolation)], logs[isolation])
+    fillers = 0
+    while any(r.poll() is None for r in runs.values()):
+        for isolation, run in runs.items():
+            if run.poll() is None or all(r.poll() is not None for r in runs.values()):
+                continue
+            filler = _hexbench_run(cores[isolation], [controller, "--terrain", "rough", "--levels", "3", "--episodes", "4",
+                                                      "--workers", "1", "--isolation", "none", "--no-record", "--out",
+                                                      str(folder / f"filler-{fillers}")], subprocess.DEVNULL)
+            fillers += 1
+            while filler.poll() is None and any(r.poll() is None for r in runs.values()):
+                time.sleep(0.5)
+            _stop(filler)
+        time.sleep(0.5)
+    out = {}
+    for isolation, run in runs.items():
+        logs[isolation].close()
+        if run.returncode != 0:
+            raise SystemExit(f"the {isolation} run failed (exit {run.returncode}): see {folder / f'{isolation}.log'}")
+        record = json.loads((folder / isolation / "result.json").read_text())
+        out[isolation] = {"wall_time_s": record["provenance"]["wall_time_s"], "core": cores[isolation],
+                          "episodes_digest": record["episodes_digest"], "git_commit": record["provenance"]["git_commit"]}
+    return out
+
+
+def report_at_once(controller: str, episodes: int | None, rounds: int) -> None:
+    mode = sandbox.resolve_isolation("auto")
+    if len(os.sched_getaffinity(0)) < 2:
+        raise SystemExit("--at-once needs two cores")
+    first, second = sorted(os.sched_getaffinity(0))[:2]
+    results = []
+    with tempfile.TemporaryDirectory(prefix="hexbench-at-once-") as d:
+        for k in range(rounds):
+            cores = {mode: first, "none": second} if k % 2 == 0 else {mode: second, "none": first}
+            folder = Path(d) / f"round-{k + 1}"
+            folder.mkdir()
+            r = at_once_round(controller, episodes, cores, folder)
+            shutil.rmtree(folder)
+            ratio = r[mode]["wall_time_s"] / r["none"]["wall_time_s"]
+            results.append({"ratio": ratio, **r})
+            print(f"round {k + 1}: {mode} on core {r[mode]['core']} {r[mode]['wall_time_s']:.1f} s, in-process on core "
+                  f"{r['none']['core']} {r['none']['wall_time_s']:.1f} s: {ratio:.3f}; episodes digests equal: "
+                  f"{r[mode]['episodes_digest'] == r['none']['episodes_digest']}", flush=True)
+    digests = {r[iso]["episodes_digest"] for r in results for iso in (mode, "none")}
+    overall = sum(r[mode]["wall_time_s"] for r in results) / sum(r["none"]["wall_time_s"] for r in results)
+    print(f"sandboxed ({mode}) / in-process wall time, run at the same time: {overall:.3f} over {rounds} round(s); "
+          f"one episodes digest for all runs: {len(digests) == 1}")
+    out = REPO / "bench" / "out"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "sandbox_overhead_at_once.json").write_text(json.dumps({
+        "controller": controller, "isolation": mode, "episodes_per_level": episodes, "rounds": results,
+        "ratio": overall, "digests_equal": len(digests) == 1}, indent=1))
+    if len(digests) != 1:
+        raise SystemExit("the runs played different episodes")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--controller", default=str(REPO / "baselines" / "ppo_cpg.py"))
-    ap.add_argument("--episodes", type=int, default=4, help="episodes per level")
+    ap.add_argument("--episodes", type=int, default=None,
+                    help="episodes per level (default 4; with --at-once the protocol's 20)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rounds", type=int, default=3, help="A/B pairs")
     ap.add_argument("--per-step", action="store_true", help="only the per-step split of a pinned worker, A/B/A/B")
     ap.add_argument("--cores", type=int, default=1, help="with --per-step: that many pinned workers at once")
     ap.add_argument("--act-loop", action="store_true", help="only act() in one process, caches warm")
+    ap.add_argument("--at-once", action="store_true",
+                    help="both isolations' `hexbench run` at the same time, one core each, swapped every round "
+                         "(full protocol unless --episodes is given)")
     args = ap.parse_args()
+    if args.at_once:
+        report_at_once(args.controller, args.episodes, args.rounds)
+        return
+    args.episodes = 4 if args.episodes is None else args.episodes
     use_controller_math()  # in-process controllers here multiply as in an evaluation worker
     if args.act_loop:
         report_act_loop(args.controller)
