@@ -40,6 +40,7 @@ import json
 import os
 import resource
 import shutil
+import signal
 import statistics
 import subprocess
 import sys
@@ -288,29 +289,36 @@ def at_once_round(controller: str, episodes: int | None, cores: dict[str, int], 
     """One round of `--at-once`: the two isolations' runs at once, each on its core in `cores`;
     (isolation -> its record's provenance and episodes digest)."""
     limit = [] if episodes is None else ["--episodes", str(episodes)]
-    runs, logs = {}, {}
-    for isolation, core in cores.items():
-        logs[isolation] = open(folder / f"{isolation}.log", "w")
-        runs[isolation] = _hexbench_run(core, [controller, "--workers", "1", "--isolation", isolation, *limit,
-                                               "--out", str(folder / isolation)], logs[isolation])
-    fillers = 0
-    while any(r.poll() is None for r in runs.values()):
-        for isolation, run in runs.items():
-            if run.poll() is None or all(r.poll() is not None for r in runs.values()):
-                continue
-            filler = _hexbench_run(cores[isolation], [controller, "--terrain", "rough", "--levels", "3", "--episodes", "4",
-                                                      "--workers", "1", "--isolation", "none", "--no-record", "--out",
-                                                      str(folder / f"filler-{fillers}")], subprocess.DEVNULL)
-            fillers += 1
-            while filler.poll() is None and any(r.poll() is None for r in runs.values()):
-                time.sleep(0.5)
-            _stop(filler)
-        time.sleep(0.5)
+    runs, logs, filler = {}, {}, None
+    try:
+        for isolation, core in cores.items():
+            logs[isolation] = open(folder / f"{isolation}.log", "w")
+            runs[isolation] = _hexbench_run(core, [controller, "--workers", "1", "--isolation", isolation, *limit,
+                                                   "--out", str(folder / isolation)], logs[isolation])
+        fillers = 0
+        while any(r.poll() is None for r in runs.values()):
+            for isolation, run in runs.items():
+                if run.poll() is None or all(r.poll() is not None for r in runs.values()):
+                    continue
+                filler = _hexbench_run(cores[isolation], [controller, "--terrain", "rough", "--levels", "3",
+                                                          "--episodes", "4", "--workers", "1", "--isolation", "none",
+                                                          "--no-record", "--out", str(folder / f"filler-{fillers}")],
+                                       subprocess.DEVNULL)
+                fillers += 1
+                while filler.poll() is None and any(r.poll() is None for r in runs.values()):
+                    time.sleep(0.5)
+                _stop(filler)
+            time.sleep(0.5)
+    finally:  # interrupted: the runs (sessions of their own) must not outlive this script
+        for run in [*runs.values(), *([filler] if filler else [])]:
+            _stop(run)
+        for log in logs.values():
+            log.close()
     out = {}
     for isolation, run in runs.items():
-        logs[isolation].close()
         if run.returncode != 0:
-            raise SystemExit(f"the {isolation} run failed (exit {run.returncode}): see {folder / f'{isolation}.log'}")
+            last_line = ((folder / f"{isolation}.log").read_text().strip().splitlines() or [""])[-1]
+            raise SystemExit(f"the {isolation} run failed (exit {run.returncode}): {last_line}")
         record = json.loads((folder / isolation / "result.json").read_text())
         out[isolation] = {"wall_time_s": record["provenance"]["wall_time_s"], "core": cores[isolation],
                           "episodes_digest": record["episodes_digest"], "git_commit": record["provenance"]["git_commit"]}
@@ -322,6 +330,7 @@ def report_at_once(controller: str, episodes: int | None, rounds: int) -> None:
     if len(os.sched_getaffinity(0)) < 2:
         raise SystemExit("--at-once needs two cores")
     first, second = sorted(os.sched_getaffinity(0))[:2]
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit("stopped (SIGTERM)"))  # as Ctrl-C: the runs are stopped too
     results = []
     with tempfile.TemporaryDirectory(prefix="hexbench-at-once-") as d:
         for k in range(rounds):
@@ -337,8 +346,11 @@ def report_at_once(controller: str, episodes: int | None, rounds: int) -> None:
                   f"{r[mode]['episodes_digest'] == r['none']['episodes_digest']}", flush=True)
     digests = {r[iso]["episodes_digest"] for r in results for iso in (mode, "none")}
     overall = sum(r[mode]["wall_time_s"] for r in results) / sum(r["none"]["wall_time_s"] for r in results)
+    committed = REPO / "leaderboard" / f"{Path(controller).stem}.json"
+    as_committed = (f"; the same as {committed.name}: {digests == {json.loads(committed.read_text())['episodes_digest']}}"
+                    if episodes is None and committed.is_file() else "")
     print(f"sandboxed ({mode}) / in-process wall time, run at the same time: {overall:.3f} over {rounds} round(s); "
-          f"one episodes digest for all runs: {len(digests) == 1}")
+          f"one episodes digest for all runs: {len(digests) == 1}{as_committed}")
     out = REPO / "bench" / "out"
     out.mkdir(parents=True, exist_ok=True)
     (out / "sandbox_overhead_at_once.json").write_text(json.dumps({
