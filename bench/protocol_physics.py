@@ -68,6 +68,9 @@ def main() -> None:
     ap.add_argument("--cores", type=int, default=2, help="processes at once, one per core")
     args = ap.parse_args()
     record_file = REPO / "leaderboard" / f"{Path(args.controller).stem}.json"
+    if not record_file.is_file():  # its rows give each level's control steps over the full protocol
+        raise SystemExit(f"{record_file.relative_to(REPO)} not found: --controller must be a baseline with a "
+                         f"committed record ({', '.join(sorted(f.stem for f in record_file.parent.glob('*.json')))})")
     record = json.loads(record_file.read_text())
     steps_per_level: dict[tuple, int] = defaultdict(int)
     rows = {}
