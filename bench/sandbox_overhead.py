@@ -272,7 +272,7 @@ def report_per_step(controller: str, cores: int) -> None:
 
 
 def _hexbench_run(core: int, argv: list[str], log) -> subprocess.Popen:
-    """`hexbench run ARGV` in a process of its own session, pinned to `core` (its workers and
+    """`hexbench run ARGV` as the leader of a new process group (setsid), pinned to `core` (its workers and
     controller processes inherit the pin)."""
     return subprocess.Popen([sys.executable, "-m", "hexbench", "run", *argv], cwd=REPO, stdout=log,
                             stderr=subprocess.STDOUT, start_new_session=True,
@@ -309,7 +309,7 @@ def at_once_round(controller: str, episodes: int | None, cores: dict[str, int], 
                     time.sleep(0.5)
                 _stop(filler)
             time.sleep(0.5)
-    finally:  # interrupted: the runs (sessions of their own) must not outlive this script
+    finally:  # interrupted: the runs (setsid: Ctrl-C does not reach them) must not outlive this script
         for run in [*runs.values(), *([filler] if filler else [])]:
             _stop(run)
         for log in logs.values():
