@@ -295,20 +295,22 @@ def at_once_round(controller: str, episodes: int | None, cores: dict[str, int], 
             logs[isolation] = open(folder / f"{isolation}.log", "w")
             runs[isolation] = _hexbench_run(core, [controller, "--workers", "1", "--isolation", isolation, *limit,
                                                    "--out", str(folder / isolation)], logs[isolation])
-        fillers = 0
-        while any(r.poll() is None for r in runs.values()):
-            for isolation, run in runs.items():
-                if run.poll() is None or all(r.poll() is not None for r in runs.values()):
-                    continue
-                filler = _hexbench_run(cores[isolation], [controller, "--terrain", "rough", "--levels", "3",
-                                                          "--episodes", "4", "--workers", "1", "--isolation", "none",
-                                                          "--no-record", "--out", str(folder / f"filler-{fillers}")],
-                                       subprocess.DEVNULL)
-                fillers += 1
-                while filler.poll() is None and any(r.poll() is None for r in runs.values()):
-                    time.sleep(0.5)
-                _stop(filler)
+
+        def running() -> list[str]:
+            return [isolation for isolation, run in runs.items() if run.poll() is None]
+
+        while len(running()) == len(runs):
             time.sleep(0.5)
+        idle_core = next((cores[isolation] for isolation in runs if isolation not in running()), None)
+        fillers = 0
+        while running():  # the other run goes on: keep the finished run's core busy until it ends
+            filler = _hexbench_run(idle_core, [controller, "--terrain", "rough", "--levels", "3", "--episodes", "4",
+                                               "--workers", "1", "--isolation", "none", "--no-record", "--out",
+                                               str(folder / f"filler-{fillers}")], subprocess.DEVNULL)
+            fillers += 1
+            while filler.poll() is None and running():
+                time.sleep(0.5)
+            _stop(filler)
     finally:  # interrupted: the runs (setsid: Ctrl-C does not reach them) must not outlive this script
         for run in [*runs.values(), *([filler] if filler else [])]:
             _stop(run)
